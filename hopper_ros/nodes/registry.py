@@ -1,0 +1,11 @@
+"""The node registry: every node of the graph, by the name `hopper run NAME` and
+`ros2 run hopper_ros NAME` use, mapped to its `module:function` entry point.
+
+This file is the single source of truth: setup.py reads it for the console scripts and the
+CMake build reads it for the `ros2 run` wrappers. It must stay importable without ROS.
+"""
+
+NODES = {
+    "setpoint_scheduler": "hopper_ros.nodes.setpoint_scheduler:main",
+    "stride_predictor": "hopper_ros.nodes.stride_predictor:main",
+}
