@@ -1,0 +1,51 @@
+"""Where the configuration lives and how it is read. No ROS import.
+
+Parameters live in `config/*.yaml` (repository checkout) or, after `colcon build`, in
+`share/hopper_ros/config` of the install prefix. `HOPPER_CONFIG_DIR` overrides both.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+_PACKAGE = "hopper_ros"
+
+
+def config_dir() -> Path:
+    """The directory holding the project's YAML configuration."""
+    override = os.environ.get("HOPPER_CONFIG_DIR")
+    if override:
+        return Path(override)
+    source_tree = Path(__file__).resolve().parent.parent / "config"
+    if source_tree.is_dir():
+        return source_tree
+    try:  # installed with colcon: share/hopper_ros/config
+        from ament_index_python.packages import get_package_share_directory
+    except ImportError as exc:  # pragma: no cover - only without a checkout and without ament
+        raise FileNotFoundError("cannot find the hopper_ros config directory; set HOPPER_CONFIG_DIR") from exc
+    return Path(get_package_share_directory(_PACKAGE)) / "config"
+
+
+def config_path(name: str | os.PathLike) -> Path:
+    """Resolve a config file: an existing path as given, else relative to `config_dir()`."""
+    path = Path(name)
+    if path.exists():
+        return path
+    candidate = config_dir() / path
+    if candidate.exists():
+        return candidate
+    raise FileNotFoundError(f"config file {str(name)!r} not found (looked in {config_dir()})")
+
+
+def load_yaml(name: str | os.PathLike) -> Any:
+    """Read one YAML config file, with the file named in any error."""
+    path = config_path(name)
+    try:
+        with open(path, encoding="utf-8") as handle:
+            return yaml.safe_load(handle)
+    except yaml.YAMLError as exc:
+        raise ValueError(f"{path}: not valid YAML: {exc}") from exc
