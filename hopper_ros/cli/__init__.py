@@ -1,0 +1,46 @@
+"""The `hopper` command line: the project's stand-in for the `ros2` CLI.
+
+Subcommands are registered in `COMMANDS` (name -> module). Each module defines
+`HELP` (one line), `add_arguments(parser)` and `main(args) -> int`, and imports rclpy only
+inside `main`, so `apply_ros_environment()` has run before rclpy is loaded. A later issue adds
+a subcommand by writing its module and adding one line here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+from hopper_ros.environment import RosEnvironmentError, apply_ros_environment
+
+COMMANDS = {
+    "run": "hopper_ros.cli.run",
+    "topic": "hopper_ros.cli.topic",
+    "launch": "hopper_ros.cli.launch",
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="hopper",
+        description="Run, inspect and launch the hopper_ros node graph.",
+    )
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, module_name in COMMANDS.items():
+        module = importlib.import_module(module_name)
+        sub = subparsers.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(sub)
+        sub.set_defaults(_main=module.main)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    try:
+        apply_ros_environment()
+    except RosEnvironmentError as exc:
+        print(f"hopper: error: {exc}", file=sys.stderr)
+        return 2
+    args = build_parser().parse_args(argv)
+    return args._main(args)
