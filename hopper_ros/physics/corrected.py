@@ -1,0 +1,146 @@
+"""Corrected AAS, the default stride predictor: the thesis's AAS plus a perturbation
+correction of its stance, computed on a few Chebyshev nodes.
+
+The thesis blames its ~5 % prediction error on folding the hip torque into a constant
+angular momentum (section 4.3.2). Measured against the exact model on the thesis ranges,
+the AAS's error has three sources: the lift-off velocity uses the stance-average momentum
+p_hat instead of the momentum at lift-off; theta' = p/(m rho^2) is linearised in rho (the leg
+compresses by up to 25 %); and the radial equation drops the momentum's change, the rest of
+the centrifugal term and cos(theta) in gravity. This predictor keeps the AAS as the seed and
+corrects all three on N Chebyshev-Lobatto nodes t_j over the seed's stance [0, T]:
+
+1. p(t) = p_td + int_0^t tau + int_0^t m g rho sin(theta), the torque impulse exactly and the
+   gravity impulse by spectral cumulative quadrature, (2.33) without averaging;
+2. theta(t) = theta_td + int_0^t p / (m rho^2), exact in rho;
+3. rho = rho_AAS + delta, where delta solves the AAS's own oscillator (2.17) driven by the
+   residual r(t) = rho theta'^2 - g cos(theta) - (omega^2 (4 rho_0 - 3 rho) - g) that the AAS
+   leaves out, from delta(0) = delta'(0) = 0 (Duhamel's integral, again by quadrature).
+
+Steps 1-3 are repeated `sweeps` times (a Picard iteration; the residual's slope is
+3 omega^2 ((rho_0/rho)^4 - 1), small against w0^2, so it converges fast), then one Newton
+step of (2.28) moves the lift-off from T to where the corrected leg force vanishes.
+Everything is a fixed number of vectorised numpy operations: no adaptive stepping. With the
+defaults (8 nodes, 2 sweeps) the mean E_p and E_v against the exact model fall from ~5 % and
+~15 % (plain AAS) to ~0.1 % (see docs/predictors.md for the figures and costs).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from numpy.polynomial import chebyshev
+
+from ._backend import ARRAY as xp
+from .aas import StanceSolution, _finish, full_ramp_impulse, predict_aas
+from .params import ModelParams
+
+NODES = 8
+SWEEPS = 2
+SEED_ITERATIONS = 3
+
+
+@lru_cache(maxsize=8)
+def chebyshev_nodes(count: int):
+    """Chebyshev-Lobatto nodes on [0, 1] and the matrix S with (S f)_i ~= int_0^{x_i} f."""
+    x = -np.cos(np.pi * np.arange(count) / (count - 1))
+    vandermonde = chebyshev.chebvander(x, count - 1)
+    integrated = np.empty((count, count))
+    for j in range(count):
+        coefficients = np.zeros(count)
+        coefficients[j] = 1.0
+        integrated[:, j] = chebyshev.chebval(x, chebyshev.chebint(coefficients, lbnd=-1))
+    cumulative = integrated @ np.linalg.inv(vandermonde) / 2.0
+    nodes = (x + 1.0) / 2.0
+    nodes.setflags(write=False)
+    cumulative.setflags(write=False)
+    return nodes, cumulative
+
+
+class StanceCorrection:
+    """Corrected stance on the nodes: times, leg length and rate, angle, momentum, (n, N)."""
+
+    __slots__ = ("t", "leg_length", "leg_rate", "leg_angle", "momentum")
+
+    def __init__(self, t, leg_length, leg_rate, leg_angle, momentum):
+        self.t, self.leg_length, self.leg_rate, self.leg_angle, self.momentum = t, leg_length, leg_rate, leg_angle, momentum
+
+
+def predict_corrected(params: ModelParams, apex_height, forward_speed, touchdown_angle, tau_0,
+                      ramp_duration=None, *, nodes: int = NODES, sweeps: int = SWEEPS):
+    """Return map of the corrected AAS for one stride (floats) or many (arrays).
+
+    `ramp_duration` t_f; None uses the seed AAS's lift-off time, which is what a controller
+    commands before the stride. Returns an `aas.StridePrediction` whose `stance` is the AAS
+    seed and whose `correction` holds the corrected stance on the nodes.
+    """
+    scalar = all(np.ndim(value) == 0 for value in (apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration)
+                 if value is not None)
+    seed = predict_aas(params, apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration,
+                       momentum_iterations=SEED_ITERATIONS)     # floats stay on the fast scalar path
+    as_1d = lambda value: np.atleast_1d(np.asarray(value, dtype=float))
+    stance: StanceSolution = seed.stance.as_array()
+    theta_td = stance.touchdown_angle
+    tau_0 = np.broadcast_to(as_1d(tau_0), theta_td.shape)
+    t_f = np.broadcast_to(as_1d(seed.ramp_duration), theta_td.shape)
+    m, g, k, d, rho_0 = params.body_mass, params.gravity, params.stiffness, params.damping, params.rest_length
+    failure = np.broadcast_to(np.atleast_1d(seed.failure_code), theta_td.shape)
+    touchdown = [np.broadcast_to(as_1d(value), theta_td.shape) for value in (
+        seed.descent_time, seed.touchdown_y, seed.touchdown_ydot, seed.touchdown_zdot,
+        seed.touchdown_rho_dot, seed.touchdown_theta_dot)]
+    t_d, y_td, ydot_td, zdot_td, rho_dot_td, theta_dot_td = touchdown
+    momentum_td = m * rho_0 * rho_0 * theta_dot_td
+    x, cumulative = chebyshev_nodes(nodes)
+    stance_time = np.broadcast_to(as_1d(seed.stance_time), theta_td.shape)
+    span = np.where(np.isfinite(stance_time), stance_time, 0.0)[:, None]   # T
+    t = span * x                                                                       # (n, N)
+    integrate = lambda f: span * (f @ cumulative.T)                                   # int_0^{t_j} f
+
+    a = stance.decay_rate[:, None]
+    w_d = stance.damped_frequency[:, None]
+    omega = stance.angular_rate[:, None]
+    decay = np.exp(-a * t)
+    cos_wt, sin_wt = np.cos(w_d * t), np.sin(w_d * t)
+    rho_aas = stance.leg_length(t.T).T            # (2.17)-(2.19) broadcast over (N, n)
+    rho_dot_aas = stance.leg_rate(t.T).T
+    theta = stance.leg_angle(t.T).T
+    torque_impulse = -tau_0[:, None] * full_ramp_impulse(xp, t, t_f[:, None])
+    delta = np.zeros_like(t)
+    delta_rate = np.zeros_like(t)
+    for _ in range(sweeps):
+        rho = rho_aas + delta
+        momentum = momentum_td[:, None] + torque_impulse + m * g * integrate(rho * np.sin(theta))   # 1.
+        theta_dot = momentum / (m * rho * rho)
+        theta = theta_td[:, None] + integrate(theta_dot)                                            # 2.
+        residual = rho * theta_dot * theta_dot - g * np.cos(theta) - (omega * omega * (4.0 * rho_0 - 3.0 * rho) - g)
+        growth = residual / decay                                                                    # 3. Duhamel
+        in_phase, quadrature = integrate(growth * cos_wt), integrate(growth * sin_wt)
+        delta = decay / w_d * (sin_wt * in_phase - cos_wt * quadrature)
+        delta_rate = -a * delta + decay * (cos_wt * in_phase + sin_wt * quadrature)
+    rho = rho_aas + delta
+    rho_dot = rho_dot_aas + delta_rate
+    momentum = momentum_td[:, None] + torque_impulse + m * g * integrate(rho * np.sin(theta))
+    correction = StanceCorrection(t, rho, rho_dot, theta, momentum)
+
+    # Lift-off: one Newton step of (2.28) from the seed's T on the corrected leg force.
+    end = (slice(None), -1)
+    rho_T, rate_T, theta_T, p_T = rho[end], rho_dot[end], theta[end], momentum[end]
+    theta_rate_T = p_T / (m * rho_T * rho_T)
+    span_T = span[:, 0]
+    accel_T = (rho_T * theta_rate_T ** 2 - g * np.cos(theta_T) - k / m * (rho_T - rho_0) - d / m * rate_T)
+    force_T = k * (rho_0 - rho_T) - d * rate_T
+    force_rate_T = -k * rate_T - d * accel_T
+    step = -force_T / np.where(force_rate_T != 0.0, force_rate_T, -1.0)
+    torque_T = np.where(span_T < t_f, -tau_0 * (1.0 - span_T / np.maximum(t_f, 1e-12)), 0.0)
+    t_lo = span_T + step
+    rho_lo = rho_T + rate_T * step + 0.5 * accel_T * step * step
+    rho_dot_lo = rate_T + accel_T * step
+    theta_lo = theta_T + theta_rate_T * step
+    p_lo = p_T + (m * g * rho_T * np.sin(theta_T) + torque_T) * step
+    theta_dot_lo = p_lo / (m * rho_lo * rho_lo)
+    ok_td = failure != 1
+    ok_lo = (failure == 0) | (failure == 4)   # the seed found a lift-off
+    prediction = _finish(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zdot_td, theta_dot_td,
+                         t_lo, t_f, rho_lo, rho_dot_lo, theta_lo, theta_dot_lo)
+    prediction.correction = correction
+    return prediction.as_scalar() if scalar else prediction
