@@ -40,21 +40,13 @@ import numpy as np
 
 from ._backend import ARRAY, select
 from .flight import apex_time_xp, descent_time_xp, flight_state_xp
+from .exact import FAILURE_TEXT, Failure
 from .params import ModelParams
 
 MOMENTUM_ITERATIONS = 3    # passes of the fixed point (2.34), Aitken-accelerated: within ~1e-6
                            # (relative) of the converged map on the thesis ranges
 ROOT_ITERATIONS = 4        # extra fixed-point steps of (2.28) for liftoff="root"
 
-# failure codes of a prediction (0: success)
-FAILURES = {
-    0: "",
-    1: "apex below the touchdown height",
-    2: "the body does not move toward the toe at touchdown",
-    3: "no lift-off: the leg force never returns to zero",
-    4: "no flight: vertical velocity at lift-off is not upward",
-    5: "non-finite prediction",
-}
 
 
 def mean_ramp_impulse(xp, stance_time, ramp_duration):
@@ -172,8 +164,8 @@ class StridePrediction:
     """A predicted stride from an apex; floats for one stride, arrays for many.
 
     Positions and times are relative to the opening apex (y = 0, t = 0). Lift-off values are
-    before the collision (2.12). `failure_code` indexes `FAILURES`; values are NaN where the
-    prediction failed.
+    before the collision (2.12). `failure_code` is an `exact.Failure` value (an int array for
+    many strides); values are NaN where the prediction failed.
     """
 
     __slots__ = ("ok", "failure_code", "next_apex_height", "next_forward_speed", "stride_length",
@@ -190,8 +182,8 @@ class StridePrediction:
     def failure(self):
         """Why the stride failed, in words ("" on success); a list for arrays."""
         if isinstance(self.failure_code, int):
-            return FAILURES[self.failure_code]
-        return [FAILURES[int(code)] for code in self.failure_code]
+            return FAILURE_TEXT[self.failure_code]
+        return [FAILURE_TEXT[int(code)] for code in self.failure_code]
 
     def as_scalar(self) -> "StridePrediction":
         """This prediction of a single stride with plain floats (arrays of length 1 in)."""
@@ -285,9 +277,11 @@ def _finish(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zd
     z_lo = rho_lo * c
     ok_up, t_a, y1, z1, speed1 = ascend(xp, params, y_lo, z_lo, ydot_lo, zdot_lo)
     compressing = rho_dot_td < 0.0
-    code = xp.where(ok_td, xp.where(compressing, xp.where(ok_lo, xp.where(ok_up, 0, 4), 3), 2), 1)
+    code = xp.where(ok_td, xp.where(compressing, xp.where(ok_lo, xp.where(ok_up, Failure.NONE, Failure.NO_FLIGHT),
+                                                          Failure.NO_LIFTOFF), Failure.NO_COMPRESSION),
+                    Failure.APEX_BELOW_TOUCHDOWN)
     finite = xp.logical_and(xp.logical_and(xp.isfinite(z1), xp.isfinite(speed1)), xp.isfinite(y1))
-    code = xp.to_int(xp.where(xp.logical_and(code == 0, xp.logical_not(finite)), 5, code))
+    code = xp.to_int(xp.where(xp.logical_and(code == 0, xp.logical_not(finite)), Failure.NON_FINITE, code))
     ok = code == 0
     nan = xp.nan
     out = StridePrediction()

@@ -36,6 +36,7 @@ import numpy as np
 from scipy.integrate import quad
 
 from .aas import StanceSolution
+from .corrected import chebyshev_nodes
 from .exact import StrideResult, polar_to_cartesian_velocity, ramp_torque
 from .flight import flight_state
 from .params import ModelParams
@@ -161,18 +162,49 @@ def exact_energy_budget(params: ModelParams, stride: StrideResult, tau_0: float,
     )
 
 
+def corrected_stance_energy(params: ModelParams, prediction, tau_0):
+    """(W_tau, E_d) of a corrected-AAS prediction [J]: Clenshaw-Curtis quadrature on its
+    stance nodes over [0, T], plus the trapezoid from T to the corrected lift-off t_lo.
+
+    Uses the corrected theta' = p / (m rho^2) and rho' instead of the AAS's (2.18), (2.20);
+    the thesis's (5.5) on the AAS's theta' misses the torque's own effect on theta'.
+    """
+    c = prediction.correction
+    m, d = params.body_mass, params.damping
+    ramp = np.asarray(prediction.ramp_duration, dtype=float)
+    tau_0 = np.asarray(tau_0, dtype=float)
+    _, cumulative = chebyshev_nodes(c.t.shape[-1])
+    span = c.t[..., -1]
+    weights = cumulative[-1] * span[..., None]                  # int_0^T f ~= sum_j w_j f(t_j)
+    torque = lambda t: -tau_0[..., None] * np.clip(1.0 - t / ramp[..., None], 0.0, None)
+    power = torque(c.t) * c.momentum / (m * c.leg_length ** 2)
+    dissipation = d * c.leg_rate ** 2
+    t_lo = np.asarray(prediction.stance_time, dtype=float)
+    tail = 0.5 * (t_lo - span)
+    power_lo = torque(t_lo[..., None])[..., 0] * np.asarray(prediction.liftoff_theta_dot)
+    work = np.sum(weights * power, axis=-1) + tail * (power[..., -1] + power_lo)
+    loss = np.sum(weights * dissipation, axis=-1) + tail * (dissipation[..., -1] + d * np.asarray(prediction.liftoff_rho_dot) ** 2)
+    return work, loss
+
+
 def predicted_energy_budget(params: ModelParams, prediction, tau_0, apex_height, forward_speed) -> EnergyBudget:
-    """The same flows from a predictor's closed forms (AAS stance; for one stride)."""
+    """The same flows from a predictor (one stride): the closed forms (5.3), (5.5) on the AAS
+    stance, or quadrature on the corrected stance when the prediction carries one."""
     stance = prediction.stance
     t_lo = prediction.stance_time
     r = params.collision_factor
+    if prediction.correction is not None:
+        work, loss = (float(np.ravel(v)[0]) for v in corrected_stance_energy(params, prediction, tau_0))
+    else:
+        work = float(torque_work(stance, tau_0, t_lo, prediction.ramp_duration))
+        loss = float(damping_loss(params, stance, t_lo))
     flight = (flight_damping_loss(params, prediction.descent_time, forward_speed, 0.0)
               + flight_damping_loss(params, prediction.ascent_time, r * prediction.liftoff_ydot, r * prediction.liftoff_zdot))
     return EnergyBudget(
         apex_energy=float(apex_energy(params, apex_height, forward_speed)),
         next_apex_energy=float(apex_energy(params, prediction.next_apex_height, prediction.next_forward_speed)),
-        torque_work=float(torque_work(stance, tau_0, t_lo, prediction.ramp_duration)),
-        damping_loss=float(damping_loss(params, stance, t_lo)),
+        torque_work=work,
+        damping_loss=loss,
         spring_energy_left=float(spring_energy_left(params, prediction.liftoff_rho)),
         collision_loss=float(collision_loss(params, prediction.liftoff_ydot, prediction.liftoff_zdot)),
         flight_damping_loss=float(flight),

@@ -39,6 +39,33 @@ COLLAPSE_FRACTION = 0.3        # leg shorter than this fraction of rho_0: the le
 MAX_LEG_ANGLE = math.radians(80.0)  # the body tipped over
 
 
+class Failure(IntEnum):
+    """Why a stride fails; shared by the exact model and the predictors."""
+
+    NONE = 0
+    APEX_BELOW_TOUCHDOWN = 1
+    NO_COMPRESSION = 2
+    NO_LIFTOFF = 3
+    NO_FLIGHT = 4
+    NON_FINITE = 5
+    LEG_COLLAPSED = 6
+    TIPPED_OVER = 7
+    ANGLE_OUT_OF_RANGE = 8
+
+
+FAILURE_TEXT = {
+    Failure.NONE: "",
+    Failure.APEX_BELOW_TOUCHDOWN: "apex below the touchdown height: the toe is already on the ground",
+    Failure.NO_COMPRESSION: "the body does not move toward the toe at touchdown",
+    Failure.NO_LIFTOFF: "no lift-off: the leg force never returns to zero",
+    Failure.NO_FLIGHT: "no flight: vertical velocity at lift-off is not upward",
+    Failure.NON_FINITE: "non-finite result",
+    Failure.LEG_COLLAPSED: "the leg collapsed in stance",
+    Failure.TIPPED_OVER: "the body tipped over in stance",
+    Failure.ANGLE_OUT_OF_RANGE: "touchdown angle beyond the leg's range",
+}
+
+
 class Phase(IntEnum):
     """Phases of a stride; compression and decompression split at the bottom event."""
 
@@ -83,7 +110,7 @@ class StrideResult:
     """Outcome of one stride from an apex. `ok` is False with `failure` saying why."""
 
     ok: bool
-    failure: str = ""
+    failure_code: Failure = Failure.NONE
     apex: EventState | None = None
     touchdown: EventState | None = None
     bottom: EventState | None = None
@@ -93,6 +120,10 @@ class StrideResult:
     liftoff_reason: str = ""                       # "leg_force" (2.28) or "full_extension"
     trajectory: Trajectory | None = None
     stance_solutions: list = field(default_factory=list, repr=False)
+
+    @property
+    def failure(self) -> str:
+        return FAILURE_TEXT[self.failure_code]
 
     @property
     def next_apex_height(self) -> float:
@@ -209,10 +240,10 @@ def simulate_stride(
     # Descent: the toe reaches the ground when z = rho_0 cos(theta_td).
     touchdown_height = rho_0 * math.cos(touchdown_angle)
     if abs(touchdown_angle) >= MAX_LEG_ANGLE:
-        result.failure = "touchdown angle beyond the leg's range"
+        result.failure_code = Failure.ANGLE_OUT_OF_RANGE
         return result
     if apex_height <= touchdown_height:
-        result.failure = "apex below the touchdown height: the toe is already on the ground"
+        result.failure_code = Failure.APEX_BELOW_TOUCHDOWN
         return result
 
     def height_above_touchdown(t):
@@ -230,7 +261,7 @@ def simulate_stride(
     result.touchdown = EventState(t_td, y_td, z_td, ydot_td, zdot_td, rho_0, touchdown_angle,
                                   float(rho_dot_td), float(theta_dot_td))
     if rho_dot_td >= 0.0:
-        result.failure = "the body does not move toward the toe at touchdown"
+        result.failure_code = Failure.NO_COMPRESSION
         return result
     toe_y = y_td + rho_0 * math.sin(touchdown_angle)
 
@@ -265,10 +296,10 @@ def simulate_stride(
             break
         state = sol.y[:, -1]
     if terminal_event is None:
-        result.failure = f"no lift-off within {MAX_STANCE_TIME} s of stance"
+        result.failure_code = Failure.NO_LIFTOFF
         return result
     if terminal_event in ("collapse", "tip_over"):
-        result.failure = "the leg collapsed in stance" if terminal_event == "collapse" else "the body tipped over in stance"
+        result.failure_code = Failure.LEG_COLLAPSED if terminal_event == "collapse" else Failure.TIPPED_OVER
         return result
 
     liftoff = _stance_event_state(t_td + terminal_time, toe_y, state)
@@ -278,7 +309,7 @@ def simulate_stride(
                        rho_0, liftoff.theta)
     result.liftoff_after_collision = after
     if after.zdot <= 0.0:
-        result.failure = "no flight: vertical velocity at lift-off is not upward"
+        result.failure_code = Failure.NO_FLIGHT
         return result
 
     t_up = float(apex_time(after.zdot, g, dv))

@@ -4,8 +4,8 @@
 
 The public functions take floats (math) or arrays (numpy, broadcasting); the `*_xp`
 versions take the backend explicitly (see `_backend`). The damping coefficients are scalar
-parameters; below `NEGLIGIBLE_DAMPING` the ballistic limit is used (the difference over a
-0.5 s flight is below 1e-7 relative), so nothing divides by zero.
+parameters; below `NEGLIGIBLE_DAMPING` the ballistic limit is used (over a 0.5 s flight it
+differs by less than 2e-6 m/s and 1e-6 m), so nothing divides by zero.
 """
 
 from __future__ import annotations

@@ -1,0 +1,36 @@
+"""Closed-form flight (2.13)-(2.16) against numerical integration of (2.8)."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from hopper_ros.physics.flight import apex_time, descent_time, flight_state
+
+G = 11.42
+
+
+@pytest.mark.parametrize("damping_h, damping_v, tolerance", [
+    (0.01, 0.23, 1e-10), (0.0, 0.0, 1e-10), (0.5, 1.2, 1e-10),
+    (1e-9, 1e-9, 5e-9),  # below NEGLIGIBLE_DAMPING: the ballistic limit, off by ~g d t^2 / 2
+])
+def test_closed_form_flight_equals_integrated_flight(damping_h, damping_v, tolerance):
+    def rhs(t, s):
+        return [s[2], s[3], -damping_h * s[2], -G - damping_v * s[3]]
+
+    times = np.linspace(0.0, 0.5, 26)
+    start = [0.1, 0.3, 2.0, 1.5]
+    integrated = solve_ivp(rhs, (0.0, 0.5), start, t_eval=times, rtol=1e-12, atol=1e-14).y
+    closed = np.array(flight_state(times, *start, G, damping_h, damping_v))
+    assert np.max(np.abs(closed - integrated)) < tolerance
+    # floats take the scalar path and agree with the arrays
+    assert np.allclose([flight_state(float(times[7]), *start, G, damping_h, damping_v)], closed[:, 7], atol=1e-15)
+
+
+@pytest.mark.parametrize("damping_v", [0.23, 0.0])
+def test_apex_and_descent_times_solve_their_equations(damping_v):
+    t_up = apex_time(1.7, G, damping_v)
+    assert flight_state(t_up, 0.0, 0.0, 0.0, 1.7, G, 0.01, damping_v)[3] == pytest.approx(0.0, abs=1e-12)
+    drops = np.array([1e-4, 0.05, 0.2, 0.4])
+    t_down = descent_time(drops, G, damping_v)
+    z = flight_state(t_down, 0.0, 0.5, 1.0, 0.0, G, 0.01, damping_v)[1]
+    assert np.allclose(0.5 - z, drops, rtol=0, atol=1e-13)
