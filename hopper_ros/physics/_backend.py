@@ -10,72 +10,29 @@ from __future__ import annotations
 
 import math
 from numbers import Real
+from types import SimpleNamespace
 
 import numpy as np
 
+SCALAR = SimpleNamespace(
+    exp=math.exp, expm1=math.expm1, log1p=math.log1p, sin=math.sin, cos=math.cos, sqrt=math.sqrt,
+    hypot=math.hypot, arctan2=math.atan2, arccos=math.acos, abs=abs, minimum=min, maximum=max,
+    pi=math.pi, nan=math.nan, isfinite=math.isfinite, asarray=float, to_int=int,
+    where=lambda condition, if_true, if_false: if_true if condition else if_false,
+    clip=lambda value, low, high: low if value < low else high if value > high else value,
+    mod=lambda value, divisor: value % divisor,
+    logical_and=lambda a, b: a and b,
+    logical_not=lambda a: not a,
+)
 
-class Scalar:
-    exp, expm1, log1p = staticmethod(math.exp), staticmethod(math.expm1), staticmethod(math.log1p)
-    sin, cos, sqrt, hypot = staticmethod(math.sin), staticmethod(math.cos), staticmethod(math.sqrt), staticmethod(math.hypot)
-    arctan2, arccos = staticmethod(math.atan2), staticmethod(math.acos)
-    abs, minimum, maximum = staticmethod(abs), staticmethod(min), staticmethod(max)
-    pi = math.pi
-    nan = math.nan
-
-    @staticmethod
-    def where(condition, if_true, if_false):
-        return if_true if condition else if_false
-
-    @staticmethod
-    def clip(value, low, high):
-        return low if value < low else high if value > high else value
-
-    @staticmethod
-    def mod(value, divisor):
-        return value % divisor
-
-    @staticmethod
-    def isfinite(value):
-        return math.isfinite(value)
-
-    @staticmethod
-    def asarray(value):
-        return float(value)
-
-    @staticmethod
-    def logical_and(a, b):
-        return a and b
-
-    @staticmethod
-    def logical_not(a):
-        return not a
-
-    @staticmethod
-    def to_int(value):
-        return int(value)
-
-
-class Array:
-    exp, expm1, log1p = staticmethod(np.exp), staticmethod(np.expm1), staticmethod(np.log1p)
-    sin, cos, sqrt, hypot = staticmethod(np.sin), staticmethod(np.cos), staticmethod(np.sqrt), staticmethod(np.hypot)
-    arctan2, arccos = staticmethod(np.arctan2), staticmethod(np.arccos)
-    abs, minimum, maximum = staticmethod(np.abs), staticmethod(np.minimum), staticmethod(np.maximum)
-    where, clip, mod, isfinite = staticmethod(np.where), staticmethod(np.clip), staticmethod(np.mod), staticmethod(np.isfinite)
-    logical_and, logical_not = staticmethod(np.logical_and), staticmethod(np.logical_not)
-    pi = np.pi
-    nan = np.nan
-
-    @staticmethod
-    def asarray(value):
-        return np.asarray(value, dtype=float)
-
-    @staticmethod
-    def to_int(value):
-        return np.asarray(value).astype(int)
-
-
-SCALAR = Scalar()
-ARRAY = Array()
+ARRAY = SimpleNamespace(
+    exp=np.exp, expm1=np.expm1, log1p=np.log1p, sin=np.sin, cos=np.cos, sqrt=np.sqrt,
+    hypot=np.hypot, arctan2=np.arctan2, arccos=np.arccos, abs=np.abs, minimum=np.minimum, maximum=np.maximum,
+    pi=np.pi, nan=np.nan, isfinite=np.isfinite, where=np.where, clip=np.clip, mod=np.mod,
+    logical_and=np.logical_and, logical_not=np.logical_not,
+    asarray=lambda value: np.asarray(value, dtype=float),
+    to_int=lambda value: np.asarray(value).astype(int),
+)
 
 
 def select(*values):

@@ -39,11 +39,11 @@ from __future__ import annotations
 import numpy as np
 
 from ._backend import ARRAY, select
-from .flight import apex_time_xp, descent_time_xp, flight_state_xp
+from .flight import apex_time_xp, decay_integral, descent_time_xp, flight_state_xp
 from .exact import FAILURE_TEXT, Failure
 from .params import ModelParams
 
-MOMENTUM_ITERATIONS = 3    # passes of the fixed point (2.34), Aitken-accelerated: within ~1e-6
+MOMENTUM_ITERATIONS = 3    # passes of the fixed point (2.34), Aitken-accelerated: within ~1e-5
                            # (relative) of the converged map on the thesis ranges
 ROOT_ITERATIONS = 4        # extra fixed-point steps of (2.28) for liftoff="root"
 
@@ -93,6 +93,7 @@ class StanceSolution:
         offset = rho_0 - rho_eq                                  # A (2.26)
         b = (rho_dot_td + a * offset) / w_d                      # B (2.27)
         phase_2 = -xp.arccos(zeta)                               # (2.23) in its quadrant
+        sin_phase_2 = -w_d / w0                                  # -sqrt(1 - zeta^2)
         dw = d * w0
         self.angular_rate, self.natural_frequency, self.damping_ratio = omega, w0, zeta
         self.damped_frequency, self.decay_rate, self.equilibrium_length = w_d, a, rho_eq
@@ -100,7 +101,7 @@ class StanceSolution:
         self.phase_1 = xp.arctan2(-b, offset)                    # (2.22) in its quadrant
         self.phase_2 = phase_2
         self.force_amplitude = xp.sqrt(k * k - 2.0 * k * dw * zeta + dw * dw)   # M_bar (2.30), cos(phi_2) = zeta
-        self.phase_3 = xp.arctan2(dw * xp.sin(phase_2), dw * zeta - k)          # (2.31) in its quadrant
+        self.phase_3 = xp.arctan2(dw * sin_phase_2, dw * zeta - k)              # (2.31) in its quadrant
         self.force_offset = k * offset                          # k (rho_0 - F/w0^2) of (2.29)
         self.mean_angle_rate = omega * (3.0 - 2.0 * rho_eq / rho_0)             # X (2.24)
         self.angle_amplitude = 2.0 * omega * self.amplitude / (rho_0 * w0)      # Y (2.25)
@@ -200,10 +201,14 @@ def descend(xp, params: ModelParams, apex_height, forward_speed, touchdown_angle
     Returns (ok, t_descent, y_td, ydot_td, zdot_td, rho_dot_td, theta_dot_td).
     """
     g, dh, dv, rho_0 = params.gravity, params.flight_damping_horizontal, params.flight_damping_vertical, params.rest_length
-    drop = apex_height - rho_0 * xp.cos(touchdown_angle)
+    c = xp.cos(touchdown_angle)
+    drop = apex_height - rho_0 * c
     t_d = descent_time_xp(xp, drop, g, dv)
-    y_td, _, ydot, zdot = flight_state_xp(xp, t_d, 0.0, apex_height, forward_speed, 0.0, g, dh, dv)
-    s, c = xp.sin(touchdown_angle), xp.cos(touchdown_angle)
+    # (2.13), (2.15), (2.16) from rest at the apex; z is the touchdown height by construction
+    y_td = forward_speed * decay_integral(xp, dh, t_d)
+    ydot = forward_speed * xp.exp(-dh * t_d)
+    zdot = -g * decay_integral(xp, dv, t_d)
+    s = xp.sin(touchdown_angle)
     rho_dot = -ydot * s + zdot * c
     theta_dot = (-ydot * c - zdot * s) / rho_0
     return drop > 0.0, t_d, y_td, ydot, zdot, rho_dot, theta_dot
@@ -252,11 +257,15 @@ def predict_aas(params: ModelParams, apex_height, forward_speed, touchdown_angle
                    + m * g * t_lo / 6.0 * (gravity_arm_td + rho_lo * xp.sin(theta_lo)))   # (2.37)
         return updated, stance, t_lo, t_f, rho_lo, theta_lo
 
-    # Fixed point p_hat = G(p_hat), accelerated by Aitken's delta-squared after two passes.
-    p0 = momentum_td
+    # Fixed point p_hat = G(p_hat) from a physical guess (half-period stance, symmetric sweep:
+    # rho_lo ~ rho_0, theta_lo ~ -theta_td), accelerated by Aitken's delta-squared.
+    half_period = xp.pi / xp.sqrt(params.stiffness / m + 3.0 * theta_dot_td * theta_dot_td)  # omega = theta_dot_td
+    t_f_guess = half_period if ramp_duration is None else ramp_duration
+    p0 = (momentum_td - tau_0 * mean_ramp_impulse(xp, half_period, t_f_guess)
+          + m * g * half_period / 6.0 * rho_0 * xp.sin(touchdown_angle))
     p1, *_ = momentum_map(p0, None)
     for _ in range(momentum_iterations - 2):
-        p2, _, t_lo, *_ = momentum_map(p1, None)
+        p2, *_ = momentum_map(p1, None)
         curvature = p2 - 2.0 * p1 + p0
         usable = xp.abs(curvature) > 1e-15
         p0, p1 = p1, xp.where(usable, p2 - (p2 - p1) ** 2 / xp.where(usable, curvature, 1.0), p2)
