@@ -43,6 +43,10 @@ from .flight import apex_time_xp, decay_integral, descent_time_xp, flight_state_
 from .exact import FAILURE_TEXT, Failure
 from .params import ModelParams
 
+# plain ints: Enum attribute lookups cost a microsecond each in the scalar hot path
+_NONE, _NO_FLIGHT, _NO_LIFTOFF = int(Failure.NONE), int(Failure.NO_FLIGHT), int(Failure.NO_LIFTOFF)
+_NO_COMPRESSION, _APEX_BELOW, _NON_FINITE = int(Failure.NO_COMPRESSION), int(Failure.APEX_BELOW_TOUCHDOWN), int(Failure.NON_FINITE)
+
 MOMENTUM_ITERATIONS = 3    # passes of the fixed point (2.34), Aitken-accelerated: within ~1e-5
                            # (relative) of the converged map on the thesis ranges
 ROOT_ITERATIONS = 4        # extra fixed-point steps of (2.28) for liftoff="root"
@@ -286,11 +290,10 @@ def _finish(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zd
     z_lo = rho_lo * c
     ok_up, t_a, y1, z1, speed1 = ascend(xp, params, y_lo, z_lo, ydot_lo, zdot_lo)
     compressing = rho_dot_td < 0.0
-    code = xp.where(ok_td, xp.where(compressing, xp.where(ok_lo, xp.where(ok_up, Failure.NONE, Failure.NO_FLIGHT),
-                                                          Failure.NO_LIFTOFF), Failure.NO_COMPRESSION),
-                    Failure.APEX_BELOW_TOUCHDOWN)
+    code = xp.where(ok_td, xp.where(compressing, xp.where(ok_lo, xp.where(ok_up, _NONE, _NO_FLIGHT), _NO_LIFTOFF),
+                                    _NO_COMPRESSION), _APEX_BELOW)
     finite = xp.logical_and(xp.logical_and(xp.isfinite(z1), xp.isfinite(speed1)), xp.isfinite(y1))
-    code = xp.to_int(xp.where(xp.logical_and(code == 0, xp.logical_not(finite)), Failure.NON_FINITE, code))
+    code = xp.to_int(xp.where(xp.logical_and(code == _NONE, xp.logical_not(finite)), _NON_FINITE, code))
     ok = code == 0
     nan = xp.nan
     out = StridePrediction()

@@ -32,8 +32,7 @@ import numpy as np
 from numpy.polynomial import chebyshev
 
 from ._backend import ARRAY as xp
-from .aas import StanceSolution, _finish, full_ramp_impulse, predict_aas
-from .exact import Failure
+from .aas import _APEX_BELOW, _NO_FLIGHT, _NONE, StanceSolution, _finish, full_ramp_impulse, predict_aas
 from .params import ModelParams
 
 NODES = 8
@@ -79,22 +78,14 @@ def predict_corrected(params: ModelParams, apex_height, forward_speed, touchdown
                  if value is not None)
     seed = predict_aas(params, apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration,
                        momentum_iterations=SEED_ITERATIONS)     # floats stay on the fast scalar path
-    as_1d = lambda value: np.atleast_1d(np.asarray(value, dtype=float))
     stance: StanceSolution = seed.stance.as_array()
-    shape = np.broadcast_shapes(*(np.shape(as_1d(value)) for value in (
-        apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration) if value is not None))
-    theta_td = np.broadcast_to(stance.touchdown_angle, shape)
-    tau_0 = np.broadcast_to(as_1d(tau_0), shape)
-    t_f = np.broadcast_to(as_1d(seed.ramp_duration), shape)
     m, g, k, d, rho_0 = params.body_mass, params.gravity, params.stiffness, params.damping, params.rest_length
-    failure = np.broadcast_to(np.atleast_1d(seed.failure_code), shape)
-    touchdown = [np.broadcast_to(as_1d(value), shape) for value in (
-        seed.descent_time, seed.touchdown_y, seed.touchdown_ydot, seed.touchdown_zdot,
-        seed.touchdown_rho_dot, seed.touchdown_theta_dot)]
-    t_d, y_td, ydot_td, zdot_td, rho_dot_td, theta_dot_td = touchdown
+    (theta_td, tau_0, t_f, failure, stance_time, t_d, y_td, ydot_td, zdot_td, rho_dot_td, theta_dot_td) = np.broadcast_arrays(
+        *(np.atleast_1d(value) for value in (
+            stance.touchdown_angle, tau_0, seed.ramp_duration, seed.failure_code, seed.stance_time, seed.descent_time,
+            seed.touchdown_y, seed.touchdown_ydot, seed.touchdown_zdot, seed.touchdown_rho_dot, seed.touchdown_theta_dot)))
     momentum_td = m * rho_0 * rho_0 * theta_dot_td
     x, cumulative = chebyshev_nodes(nodes)
-    stance_time = np.broadcast_to(as_1d(seed.stance_time), shape)
     span = np.where(np.isfinite(stance_time), stance_time, 0.0)[:, None]   # T
     t = span * x                                                                       # (n, N)
     integrate = lambda f: span * (f @ cumulative.T)                                   # int_0^{t_j} f
@@ -141,8 +132,8 @@ def predict_corrected(params: ModelParams, apex_height, forward_speed, touchdown
     theta_lo = theta_T + theta_rate_T * step
     p_lo = p_T + (m * g * rho_T * np.sin(theta_T) + torque_T) * step
     theta_dot_lo = p_lo / (m * rho_lo * rho_lo)
-    ok_td = failure != Failure.APEX_BELOW_TOUCHDOWN
-    ok_lo = (failure == Failure.NONE) | (failure == Failure.NO_FLIGHT)   # the seed found a lift-off
+    ok_td = failure != _APEX_BELOW
+    ok_lo = (failure == _NONE) | (failure == _NO_FLIGHT)   # the seed found a lift-off
     prediction = _finish(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zdot_td, theta_dot_td,
                          t_lo, t_f, rho_lo, rho_dot_lo, theta_lo, theta_dot_lo)
     prediction.correction = correction
