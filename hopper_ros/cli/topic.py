@@ -32,6 +32,10 @@ with --once/-n arrived, within S seconds it fails (exit 1); without --once/-n it
 S seconds (exit 0)."""
 
 _POLL_PERIOD = 0.05  # [s] between looks at the graph while waiting for discovery
+# Without a daemon, `list` sees what it discovers in this time. Measured here with LOCALHOST
+# discovery: a newcomer sees an existing participant's topics after 0.06 to 2.7 s (Fast DDS
+# re-announces every 3 s), so the default waits a full period.
+DEFAULT_SPIN_TIME = 3.5  # [s]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -43,7 +47,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "-a", "--include-hidden-topics", action="store_true", help="include hidden topics (names starting with _)"
     )
     listing.add_argument(
-        "--spin-time", type=float, default=0.5, metavar="S", help="time to wait for discovery [s] (default 0.5)"
+        "--spin-time",
+        type=float,
+        default=DEFAULT_SPIN_TIME,
+        metavar="S",
+        help=f"time to wait for discovery [s] (default {DEFAULT_SPIN_TIME:g})",
     )
     listing.set_defaults(_verb=_list)
 
@@ -72,44 +80,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    import rclpy
+    from hopper_ros.nodes.common import StopSignals
 
-    try:
-        rclpy.init(args=["hopper"])
-    except KeyboardInterrupt:
-        return 0
+    stop = StopSignals().install()  # Ctrl-C / SIGTERM end the command cleanly (exit 0)
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
     node = None
     try:
+        rclpy.init(args=["hopper"], signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node(f"_hopper_topic_{os.getpid()}", start_parameter_services=False)
-        return args._verb(args, node)
-    except KeyboardInterrupt:
-        return 0
-    except Exception as exc:  # noqa: BLE001
-        from rclpy.executors import ExternalShutdownException
-
-        if isinstance(exc, ExternalShutdownException):  # SIGINT / SIGTERM
-            return 0
-        raise
+        stop.attach(node)
+        return args._verb(args, node, stop)
     finally:
+        stop.detach()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        stop.uninstall()
 
 
-def _sleep_or_stop(seconds: float) -> bool:
-    """Sleep; False when rclpy was shut down (a signal arrived)."""
-    import rclpy
-
+def _sleep_or_stop(seconds: float, stop) -> bool:
+    """Sleep; False when a stop signal arrived."""
     time.sleep(seconds)
-    return rclpy.ok()
+    return stop.received is None
 
 
-def _list(args: argparse.Namespace, node) -> int:
+def _list(args: argparse.Namespace, node, stop) -> int:
     from rclpy.topic_or_service_is_hidden import topic_or_service_is_hidden
 
     end = time.monotonic() + max(args.spin_time, 0.0)
     while time.monotonic() < end:
-        if not _sleep_or_stop(min(_POLL_PERIOD, max(end - time.monotonic(), 0.0))):
+        if not _sleep_or_stop(min(_POLL_PERIOD, max(end - time.monotonic(), 0.0)), stop):
             return 0
     for name, types in sorted(node.get_topic_names_and_types()):
         if topic_or_service_is_hidden(name) and not args.include_hidden_topics:
@@ -132,7 +134,7 @@ def _subscription_qos(publishers):
     )
 
 
-def _echo(args: argparse.Namespace, node) -> int:
+def _echo(args: argparse.Namespace, node, stop) -> int:
     from rclpy.executors import SingleThreadedExecutor
 
     if args.count is not None and args.count < 1:
@@ -158,7 +160,7 @@ def _echo(args: argparse.Namespace, node) -> int:
         if not warned and time.monotonic() - start > 1.0:
             print(f"waiting for a publisher on {topic} ...", file=sys.stderr, flush=True)
             warned = True
-        if not _sleep_or_stop(_POLL_PERIOD if left is None else min(_POLL_PERIOD, left)):
+        if not _sleep_or_stop(_POLL_PERIOD if left is None else min(_POLL_PERIOD, left), stop):
             return 0
 
     type_name = args.type
@@ -203,7 +205,9 @@ def _echo(args: argparse.Namespace, node) -> int:
                     file=sys.stderr,
                 )
                 return 1
-            executor.spin_once(timeout_sec=None if left is None else left)
+            executor.spin_once(timeout_sec=1.0 if left is None else min(left, 1.0))
+            if stop.received is not None:
+                return 0
     finally:
         executor.shutdown(timeout_sec=1.0)
     return 0

@@ -8,8 +8,8 @@ A node module defines its `rclpy.node.Node` subclass (a thin adapter over a plai
 `run_node` applies the ROS environment (loopback-only discovery unless the user chose a range),
 initialises rclpy with `args` (None: `sys.argv`, so `--ros-args ...` work as with `ros2 run`),
 builds the node, logs one startup line (pid, domain id, discovery range) and spins it on a
-SingleThreadedExecutor. SIGINT and SIGTERM both end the spin; the node is destroyed, rclpy shut
-down and 0 returned. A node that cannot start (bad configuration) or whose callback raises makes
+SingleThreadedExecutor. SIGINT and SIGTERM both end the spin (unless the parent process had
+set them to be ignored); the node is destroyed, rclpy shut down and 0 returned. A node that cannot start (bad configuration) or whose callback raises makes
 it return 1.
 """
 
@@ -25,6 +25,85 @@ from typing import Callable, Sequence
 from hopper_ros.environment import RosEnvironmentError, apply_ros_environment, discovery_range
 
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_SPIN_PERIOD = 1.0  # [s] the executor wakes at least this often (belt and braces, see StopSignals)
+
+
+class StopSignals:
+    """SIGINT/SIGTERM as a stop request that also wakes an rclpy executor at once.
+
+    rclpy's own signal handlers are not used: with them a SIGINT arriving while the executor
+    builds its wait set was seen to be lost (the node then waited forever). Here the Python
+    handlers record the signal, and `signal.set_wakeup_fd` makes the interpreter's C handler
+    write the signal number to a pipe at signal time; a watcher thread reads it and triggers a
+    guard condition of the attached node, which wakes the executor's wait.
+    """
+
+    def __init__(self) -> None:
+        self.received: int | None = None
+        self._guard = None
+        self._previous: dict[int, object] = {}
+        self._old_wakeup_fd: int | None = None
+        self._pipe: tuple[int, int] | None = None
+        self._watcher: threading.Thread | None = None
+
+    def install(self) -> "StopSignals":
+        if threading.current_thread() is not threading.main_thread():
+            return self  # only the main thread can handle signals: the caller's job then
+        read_fd, write_fd = os.pipe()
+        os.set_blocking(write_fd, False)
+        self._pipe = (read_fd, write_fd)
+        self._old_wakeup_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+        for signum in _STOP_SIGNALS:
+            if signal.getsignal(signum) == signal.SIG_IGN:
+                continue  # ignored by whoever started us (e.g. `cmd &` in a script): keep it so
+            self._previous[signum] = signal.signal(signum, self._on_signal)
+        self._watcher = threading.Thread(target=self._watch, name="stop-signals", daemon=True)
+        self._watcher.start()
+        return self
+
+    def _on_signal(self, signum: int, _frame) -> None:
+        if self.received is None:
+            self.received = signum
+
+    def _watch(self) -> None:
+        while True:
+            try:
+                data = os.read(self._pipe[0], 64)
+            except OSError:
+                return
+            if not data:
+                return
+            for signum in data:
+                if signum in self._previous:
+                    if self.received is None:
+                        self.received = signum
+                    guard = self._guard
+                    if guard is not None:
+                        try:
+                            guard.trigger()
+                        except Exception:  # noqa: BLE001 - destroyed meanwhile: nothing to wake
+                            pass
+
+    def attach(self, node) -> None:
+        """Wake the executor spinning `node` when a stop signal arrives."""
+        self._guard = node.create_guard_condition(lambda: None)
+        if self.received is not None:
+            self._guard.trigger()
+
+    def detach(self) -> None:
+        self._guard = None
+
+    def uninstall(self) -> None:
+        self._guard = None
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+        self._previous.clear()
+        if self._pipe is not None:
+            signal.set_wakeup_fd(self._old_wakeup_fd if self._old_wakeup_fd is not None else -1)
+            os.close(self._pipe[1])  # the watcher reads EOF and ends
+            self._watcher.join(1.0)
+            os.close(self._pipe[0])
+            self._pipe = None
 
 
 def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] | None = None) -> int:  # noqa: F821
@@ -35,50 +114,45 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
-    # Our handlers go in before rclpy.init: rclpy's own SIGINT/SIGTERM handlers (which shut the
-    # context down and wake the executor) chain to them, so we learn which signal stopped us,
-    # and a signal arriving before rclpy is up is not lost.
-    received: list[int] = []
-    previous = {}
-    if threading.current_thread() is threading.main_thread():
-        for signum in _STOP_SIGNALS:
-            previous[signum] = signal.signal(signum, lambda s, _f: received.append(s))
+    stop = StopSignals().install()  # before rclpy: a signal during start-up is not lost either
 
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
     node = None
     executor = None
     status = 0
     try:
-        rclpy.init(args=list(args) if args is not None else None)
-        if not received:
+        rclpy.init(args=list(args) if args is not None else None, signal_handler_options=SignalHandlerOptions.NO)
+        if stop.received is None:
             node = node_factory()
+            stop.attach(node)
             node.get_logger().info(
                 f"started: pid {os.getpid()}, ROS_DOMAIN_ID {node.context.get_domain_id()}, "
                 f"discovery range {discovery_range()}"
             )
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            if not received:
-                executor.spin()
+            while stop.received is None and node.context.ok():
+                executor.spin_once(timeout_sec=_SPIN_PERIOD)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as exc:  # noqa: BLE001 - a node's failure is reported, then we clean up
-        if not received:  # otherwise: the shutdown interrupted start-up, not an error
+        if stop.received is None:  # otherwise: the shutdown interrupted start-up, not an error
             status = 1
             if isinstance(exc, (ValueError, OSError)) and node is None:
                 print(f"error: {exc}", file=sys.stderr)  # configuration: the message says it all
             else:
                 traceback.print_exc()
     finally:
-        if received and node is not None:
-            node.get_logger().info(f"stopping on {signal.Signals(received[0]).name}")
+        if stop.received is not None and node is not None:
+            node.get_logger().info(f"stopping on {signal.Signals(stop.received).name}")
+        stop.detach()
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        stop.uninstall()
     return status
