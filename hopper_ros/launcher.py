@@ -25,7 +25,8 @@ every process group gets SIGINT, then SIGTERM after `sigint_timeout`, then SIGKI
 `sigterm_timeout`; signals go to the whole group, so grandchildren stop too. Exit status: 0 when
 the stop was requested and every node exited 0; otherwise non-zero (the status of the node that
 ended by itself: its exit code, 128 + signal, or 1 when it exited 0; 1 when a node needed
-SIGTERM/SIGKILL or failed while stopping).
+SIGTERM/SIGKILL or failed while stopping). Should the launcher itself be killed, Linux sends
+each node SIGTERM (PR_SET_PDEATHSIG).
 """
 
 from __future__ import annotations
@@ -246,6 +247,26 @@ def _group_alive(pgid: int) -> bool:
     return False
 
 
+def _die_with_parent(parent_pid: int):
+    """A preexec_fn asking Linux to send SIGTERM to the child if the launcher itself dies
+    (SIGKILL included), so not even a killed launcher leaves its nodes running."""
+    if not sys.platform.startswith("linux"):
+        return None
+    import ctypes
+
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+    def preexec() -> None:
+        prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+        if os.getppid() != parent_pid:  # the launcher died before that: stop right away
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    return preexec
+
+
 @dataclass
 class _Child:
     spec: ChildSpec
@@ -365,6 +386,7 @@ class Launcher:
             env=spec.env,
             cwd=spec.cwd,
             start_new_session=True,  # own session and process group: no terminal signals, group kill
+            preexec_fn=_die_with_parent(os.getpid()),
         )
         child = _Child(spec, process)
         self._children.append(child)

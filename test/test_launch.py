@@ -193,3 +193,42 @@ def test_a_dying_node_stops_the_others(hopper_cli, tmp_path):
     for pid in pids.values():
         assert not process_alive(pid), f"pid {pid} left behind"
         assert process_group_members(pid) == []
+
+
+def test_nodes_of_a_killed_launcher_stop_too():
+    import time
+
+    from conftest import REPO, SAFETY_TIMEOUT, process_alive
+
+    script = textwrap.dedent(
+        """
+        from hopper_ros.launcher import ChildSpec, Launcher
+        Launcher([ChildSpec("orphan", ["sh", "-c", "echo ready; exec sleep 120"])]).run()
+        """
+    )
+    process = subprocess.Popen(
+        [sys.executable, "-c", script],
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        stdout=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    child = None
+    try:
+        started = process.stdout.readline()
+        assert started.startswith("[launch] started orphan: pid"), started
+        assert process.stdout.readline() == "[orphan] ready\n"
+        child = int(started.split()[-1])
+        process.kill()  # SIGKILL: the launcher cannot stop anything itself
+        process.wait(SAFETY_TIMEOUT)
+        end = time.monotonic() + SAFETY_TIMEOUT
+        while process_alive(child) and time.monotonic() < end:
+            time.sleep(0.05)
+        assert not process_alive(child), "the node outlived its killed launcher"
+    finally:
+        if process.poll() is None:
+            process.kill()
+        if child is not None and process_alive(child):
+            os.kill(child, signal.SIGKILL)
+        process.stdout.close()
