@@ -19,6 +19,7 @@ COMMANDS = {
     "run": "hopper_ros.cli.run",
     "topic": "hopper_ros.cli.topic",
     "launch": "hopper_ros.cli.launch",
+    "predictors": "hopper_ros.cli.predictors",
 }
 
 
