@@ -21,15 +21,12 @@ SCALAR = SimpleNamespace(
     where=lambda condition, if_true, if_false: if_true if condition else if_false,
     clip=lambda value, low, high: low if value < low else high if value > high else value,
     mod=lambda value, divisor: value % divisor,
-    logical_and=lambda a, b: a and b,
-    logical_not=lambda a: not a,
 )
 
 ARRAY = SimpleNamespace(
     exp=np.exp, expm1=np.expm1, log1p=np.log1p, sin=np.sin, cos=np.cos, sqrt=np.sqrt,
     hypot=np.hypot, arctan2=np.arctan2, arccos=np.arccos, abs=np.abs, minimum=np.minimum, maximum=np.maximum,
     pi=np.pi, nan=np.nan, isfinite=np.isfinite, where=np.where, clip=np.clip, mod=np.mod,
-    logical_and=np.logical_and, logical_not=np.logical_not,
     asarray=lambda value: np.asarray(value, dtype=float),
     to_int=lambda value: np.asarray(value).astype(int),
 )

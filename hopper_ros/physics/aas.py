@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._backend import ARRAY, select
+from ._backend import ARRAY, SCALAR, select
 from .flight import apex_time_xp, decay_integral, descent_time_xp, flight_state_xp
 from .exact import FAILURE_TEXT, Failure
 from .params import ModelParams
@@ -279,6 +279,23 @@ def predict_aas(params: ModelParams, apex_height, forward_speed, touchdown_angle
                    t_lo, t_f, rho_lo, stance.leg_rate(t_lo), theta_lo, stance.leg_angle_rate(t_lo))
 
 
+def _failure_code(xp, ok_touchdown, compressing, ok_liftoff, ok_flight, result_sum):
+    """The first failure of a stride (an `exact.Failure` value; an int array for many)."""
+    if xp is SCALAR:  # plain branches: this runs once per stride in the scalar hot path
+        if not ok_touchdown:
+            return _APEX_BELOW
+        if not compressing:
+            return _NO_COMPRESSION
+        if not ok_liftoff:
+            return _NO_LIFTOFF
+        if not ok_flight:
+            return _NO_FLIGHT
+        return _NONE if xp.isfinite(result_sum) else _NON_FINITE
+    code = xp.where(ok_touchdown, xp.where(compressing, xp.where(ok_liftoff, xp.where(ok_flight, _NONE, _NO_FLIGHT),
+                                                                 _NO_LIFTOFF), _NO_COMPRESSION), _APEX_BELOW)
+    return xp.to_int(xp.where((code == _NONE) & ~xp.isfinite(result_sum), _NON_FINITE, code))
+
+
 def _finish(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zdot_td, theta_dot_td,
             t_lo, t_f, rho_lo, rho_dot_lo, theta_lo, theta_dot_lo) -> StridePrediction:
     """Lift-off state -> collision -> ascent, and the prediction record (shared by predictors)."""
@@ -289,17 +306,16 @@ def _finish(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zd
     y_lo = y_td + rho_0 * xp.sin(stance.touchdown_angle) - rho_lo * s
     z_lo = rho_lo * c
     ok_up, t_a, y1, z1, speed1 = ascend(xp, params, y_lo, z_lo, ydot_lo, zdot_lo)
-    compressing = rho_dot_td < 0.0
-    code = xp.where(ok_td, xp.where(compressing, xp.where(ok_lo, xp.where(ok_up, _NONE, _NO_FLIGHT), _NO_LIFTOFF),
-                                    _NO_COMPRESSION), _APEX_BELOW)
-    finite = xp.logical_and(xp.logical_and(xp.isfinite(z1), xp.isfinite(speed1)), xp.isfinite(y1))
-    code = xp.to_int(xp.where(xp.logical_and(code == _NONE, xp.logical_not(finite)), _NON_FINITE, code))
-    ok = code == 0
+    code = _failure_code(xp, ok_td, rho_dot_td < 0.0, ok_lo, ok_up, z1 + speed1 + y1)
+    ok = code == _NONE
     nan = xp.nan
     out = StridePrediction()
     out.ok, out.failure_code = ok, code
-    out.next_apex_height, out.next_forward_speed = xp.where(ok, z1, nan), xp.where(ok, speed1, nan)
-    out.stride_length, out.stride_time = xp.where(ok, y1, nan), xp.where(ok, t_d + t_lo + t_a, nan)
+    if xp is SCALAR and ok:
+        out.next_apex_height, out.next_forward_speed, out.stride_length, out.stride_time = z1, speed1, y1, t_d + t_lo + t_a
+    else:
+        out.next_apex_height, out.next_forward_speed = xp.where(ok, z1, nan), xp.where(ok, speed1, nan)
+        out.stride_length, out.stride_time = xp.where(ok, y1, nan), xp.where(ok, t_d + t_lo + t_a, nan)
     out.descent_time, out.stance_time, out.ascent_time, out.ramp_duration = t_d, t_lo, t_a, t_f
     out.touchdown_y, out.touchdown_ydot, out.touchdown_zdot = y_td, ydot_td, zdot_td
     out.touchdown_rho_dot, out.touchdown_theta_dot = rho_dot_td, theta_dot_td
