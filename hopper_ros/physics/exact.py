@@ -324,7 +324,7 @@ def simulate_stride(
 def _stance_event_state(t: float, toe_y: float, s) -> EventState:
     rho, theta, rho_dot, theta_dot = (float(v) for v in s)
     ydot, zdot = polar_to_cartesian_velocity(rho, theta, rho_dot, theta_dot)
-    return EventState(t, toe_y - rho * math.sin(theta), rho * math.cos(theta), float(ydot), float(zdot),
+    return EventState(float(t), toe_y - rho * math.sin(theta), rho * math.cos(theta), float(ydot), float(zdot),
                       rho, theta, rho_dot, theta_dot)
 
 
