@@ -29,7 +29,6 @@ Corrections to the seed:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,7 +36,7 @@ from scipy.integrate import quad
 
 from .aas import StanceSolution
 from .corrected import chebyshev_nodes
-from .exact import StrideResult, polar_to_cartesian_velocity, ramp_torque
+from .exact import StrideResult, ramp_torque
 from .flight import flight_state
 from .params import ModelParams
 

@@ -330,41 +330,53 @@ def _stance_event_state(t: float, toe_y: float, s) -> EventState:
 
 def _sample(result: StrideResult, p: ModelParams, tau_0: float, ramp_duration: float,
             toe_y: float, period: float) -> Trajectory:
-    """Sample a successful stride on a regular grid, phase by phase."""
-    apex, td, lo, after, nxt = result.apex, result.touchdown, result.liftoff, result.liftoff_after_collision, result.next_apex
-    g, dh, dv, rho_0 = p.gravity, p.flight_damping_horizontal, p.flight_damping_vertical, p.rest_length
-    n = int(math.floor((nxt.t - apex.t) / period + 1e-9)) + 1
+    """Sample a successful stride on a regular grid, the stance from the dense solutions."""
+
+    def stance_state(ts):
+        states = np.empty((4, ts.size))
+        for sol in result.stance_solutions:
+            mask = (ts >= sol.t[0]) & (ts <= sol.t[-1])
+            if mask.any():
+                states[:, mask] = sol.sol(ts[mask])
+        return states
+
+    return sample_stride(p, result.apex, result.touchdown.t, result.liftoff_after_collision, toe_y,
+                         stance_state, tau_0, ramp_duration, period)
+
+
+def sample_stride(params: ModelParams, apex: EventState, touchdown_time: float, liftoff: EventState,
+                  toe_y: float, stance_state, tau_0: float, ramp_duration: float, period: float) -> Trajectory:
+    """Sample one stride on t = apex.t + n * period up to the next apex, phase by phase.
+
+    Flights in closed form from `apex` and from `liftoff` (the state after the collision,
+    its theta the held leg angle); the stance from `stance_state(ts)` -> (rho, theta, rho',
+    theta') at times ts from touchdown. Shared by the exact model and the predictors.
+    """
+    g, dh, dv, rho_0 = params.gravity, params.flight_damping_horizontal, params.flight_damping_vertical, params.rest_length
+    t_up = float(apex_time(liftoff.zdot, g, dv))
+    n = int(math.floor((liftoff.t + t_up - apex.t) / period + 1e-9)) + 1
     t = apex.t + period * np.arange(n)
     out = {name: np.empty(n) for name in ("y", "z", "ydot", "zdot", "rho", "theta", "torque")}
     phase = np.empty(n, dtype=np.int8)
 
-    descent = t < td.t
-    y, z, yd, zd = flight_state(t[descent] - apex.t, apex.y, apex.z, apex.ydot, 0.0, g, dh, dv)
-    _fill(out, descent, y, z, yd, zd, rho_0, apex.theta, 0.0)
+    def fill(mask, y, z, ydot, zdot, rho, theta, torque):
+        out["y"][mask], out["z"][mask], out["ydot"][mask], out["zdot"][mask] = y, z, ydot, zdot
+        out["rho"][mask], out["theta"][mask], out["torque"][mask] = rho, theta, torque
+
+    descent = t < touchdown_time
+    fill(descent, *flight_state(t[descent] - apex.t, apex.y, apex.z, apex.ydot, 0.0, g, dh, dv), rho_0, apex.theta, 0.0)
     phase[descent] = Phase.DESCENT
 
-    stance = (t >= td.t) & (t < lo.t)
-    ts = t[stance] - td.t
-    states = np.empty((4, ts.size))
-    for sol in result.stance_solutions:
-        lo_t, hi_t = sol.t[0], sol.t[-1]
-        mask = (ts >= lo_t) & (ts <= hi_t)
-        if mask.any():
-            states[:, mask] = sol.sol(ts[mask])
-    rho, theta, rho_dot, theta_dot = states
-    yd, zd = polar_to_cartesian_velocity(rho, theta, rho_dot, theta_dot)
-    _fill(out, stance, toe_y - rho * np.sin(theta), rho * np.cos(theta), yd, zd, rho, theta,
-          ramp_torque(ts, tau_0, ramp_duration))
-    bottom_t = result.bottom.t if result.bottom else lo.t
-    phase[stance] = np.where(t[stance] < bottom_t, Phase.COMPRESSION, Phase.DECOMPRESSION)
+    stance = (t >= touchdown_time) & (t < liftoff.t)
+    ts = t[stance] - touchdown_time
+    rho, theta, rho_dot, theta_dot = stance_state(ts)
+    ydot, zdot = polar_to_cartesian_velocity(rho, theta, rho_dot, theta_dot)
+    fill(stance, toe_y - rho * np.sin(theta), rho * np.cos(theta), ydot, zdot, rho, theta,
+         ramp_torque(ts, tau_0, ramp_duration))
+    phase[stance] = np.where(zdot < 0.0, Phase.COMPRESSION, Phase.DECOMPRESSION)   # split at the bottom, z' = 0
 
-    ascent = t >= lo.t
-    y, z, yd, zd = flight_state(t[ascent] - lo.t, after.y, after.z, after.ydot, after.zdot, g, dh, dv)
-    _fill(out, ascent, y, z, yd, zd, rho_0, lo.theta, 0.0)
+    ascent = t >= liftoff.t
+    fill(ascent, *flight_state(t[ascent] - liftoff.t, liftoff.y, liftoff.z, liftoff.ydot, liftoff.zdot, g, dh, dv),
+         rho_0, liftoff.theta, 0.0)
     phase[ascent] = Phase.ASCENT
     return Trajectory(t=t, phase=phase, **out)
-
-
-def _fill(out, mask, y, z, ydot, zdot, rho, theta, torque):
-    out["y"][mask], out["z"][mask], out["ydot"][mask], out["zdot"][mask] = y, z, ydot, zdot
-    out["rho"][mask], out["theta"][mask], out["torque"][mask] = rho, theta, torque

@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hopper_ros.physics.aas import StanceSolution, predict_aas  # noqa: E402
+from hopper_ros.physics.aas import predict_aas  # noqa: E402
 from hopper_ros.physics.corrected import predict_corrected  # noqa: E402
 from hopper_ros.physics.evaluation import THESIS_RANGES, breakdown, compare_predictors, prediction_errors  # noqa: E402
 from hopper_ros.physics.exact import simulate_stride  # noqa: E402
