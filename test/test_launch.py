@@ -17,7 +17,7 @@ STARTED_CHILD = r"^\[launch\] started {}: pid (\d+)$"
 
 def test_example_launch_file_is_valid():
     description = load_launch("launch/example.yaml")
-    [child] = description.children
+    child, predictor = description.children
     assert child.label == "hopper/setpoint_scheduler"
     assert child.argv[1:] == [
         "-m", "hopper_ros.cli", "run", "setpoint_scheduler", "--ros-args",
@@ -25,6 +25,11 @@ def test_example_launch_file_is_valid():
         "-p", "schedule_file:=setpoints/fig5_5.yaml", "-r", "apex:=apex", "--",
     ]  # fmt: skip
     assert child.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] in ("LOCALHOST", "OFF", "SUBNET", "SYSTEM_DEFAULT")
+    assert predictor.label == "hopper/stride_predictor"
+    assert predictor.argv[4:] == [
+        "stride_predictor", "--ros-args", "-r", "__ns:=/hopper",
+        "-p", "predictor:=corrected", "-p", "model_file:=model.yaml", "--",
+    ]  # fmt: skip
 
 
 def test_entry_fields_become_ros_arguments(tmp_path):
