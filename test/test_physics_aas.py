@@ -93,6 +93,6 @@ def test_return_map_is_consistent_and_names_failures():
     assert one.stride_time == pytest.approx(one.descent_time + one.stance_time + one.ascent_time)
     assert one.liftoff_theta < 0.0 < one.stride_length
     # the ramp ends at the predicted lift-off by default (section 4.1)
-    assert one.ramp_duration == one.stance_time
+    assert one.stance_time == one.ramp_duration
     with pytest.raises(ValueError, match="liftoff"):
         predict_aas(PARAMS, 0.35, 2.0, 0.3, 5.0, liftoff="guess")
