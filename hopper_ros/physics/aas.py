@@ -47,10 +47,9 @@ from .params import ModelParams
 _NONE, _NO_FLIGHT, _NO_LIFTOFF = int(Failure.NONE), int(Failure.NO_FLIGHT), int(Failure.NO_LIFTOFF)
 _NO_COMPRESSION, _APEX_BELOW, _NON_FINITE = int(Failure.NO_COMPRESSION), int(Failure.APEX_BELOW_TOUCHDOWN), int(Failure.NON_FINITE)
 
-MOMENTUM_ITERATIONS = 3    # passes of the fixed point (2.34), Aitken-accelerated: within ~1e-5
+MOMENTUM_ITERATIONS = 3    # passes of the fixed point (2.34), Aitken-accelerated: within 2e-5
                            # (relative) of the converged map on the thesis ranges
 ROOT_ITERATIONS = 4        # extra fixed-point steps of (2.28) for liftoff="root"
-
 
 
 def mean_ramp_impulse(xp, stance_time, ramp_duration):

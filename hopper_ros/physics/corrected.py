@@ -21,7 +21,7 @@ Steps 1-3 are repeated `sweeps` times (a Picard iteration; the residual's slope 
 step of (2.28) moves the lift-off from T to where the corrected leg force vanishes.
 Everything is a fixed number of vectorised numpy operations: no adaptive stepping. With the
 defaults (8 nodes, 2 sweeps) the mean E_p and E_v against the exact model fall from ~5 % and
-~15 % (plain AAS) to ~0.1 % (see docs/predictors.md for the figures and costs).
+~15 % (plain AAS) to ~0.1 % (docs/predictors/predictors.md has the figures and costs).
 """
 
 from __future__ import annotations
