@@ -189,6 +189,14 @@ class StridePrediction:
             return FAILURE_TEXT[self.failure_code]
         return [FAILURE_TEXT[int(code)] for code in self.failure_code]
 
+    def take(self, index) -> "StridePrediction":
+        """The predictions of the strides `index` selects (arrays only)."""
+        out = StridePrediction()
+        for name in self.__slots__:
+            value = getattr(self, name)
+            setattr(out, name, value[index] if isinstance(value, np.ndarray) else value)
+        return out
+
     def as_scalar(self) -> "StridePrediction":
         """This prediction of a single stride with plain floats (arrays of length 1 in)."""
         for name in self.__slots__:

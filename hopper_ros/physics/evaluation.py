@@ -8,11 +8,14 @@ next apex speed 0.6-3.2 m/s and height 0.2-0.5 m.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from .aas import predict_aas
+from .corrected import predict_corrected
+from .exact import simulate_stride
 from .metrics import position_error_pct, time_error_pct, velocity_error_pct
 from .params import ModelParams
 from .predictors import predict_exact, predict_stride
@@ -41,6 +44,10 @@ class StrideSet:
 
     def subset(self, mask) -> "StrideSet":
         return StrideSet(*(getattr(self, f)[mask] for f in self.__dataclass_fields__))
+
+    def columns(self) -> tuple[np.ndarray, ...]:
+        """(apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration), a predictor's inputs."""
+        return tuple(getattr(self, f) for f in self.__dataclass_fields__)
 
 
 def sample_thesis_strides(params: ModelParams, count: int, seed: int = 0) -> StrideSet:
@@ -105,21 +112,40 @@ class Comparison:
 
 
 def compare_predictors(params: ModelParams, count: int, seed: int = 0,
-                       methods: tuple[str, ...] = ("aas", "corrected")) -> Comparison:
-    """Draw `count` strides, keep those the exact model runs successfully, score predictors."""
+                       methods: tuple[str, ...] = ("aas", "corrected"), keep: int | None = None) -> Comparison:
+    """Draw `count` strides, keep those the exact model runs successfully (the first `keep`
+    of them, if given), score the predictors on them."""
     strides = sample_thesis_strides(params, count, seed)
-    exact = predict_exact(params, strides.apex_height, strides.forward_speed, strides.touchdown_angle,
-                          strides.tau_0, strides.ramp_duration)
-    keep = successful(exact)
-    kept = strides.subset(keep)
-    exact_kept = predict_exact(params, kept.apex_height, kept.forward_speed, kept.touchdown_angle,
-                               kept.tau_0, kept.ramp_duration) if keep.any() else exact
-    errors = {}
-    for method in methods:
-        prediction = predict_stride(params, kept.apex_height, kept.forward_speed, kept.touchdown_angle,
-                                    kept.tau_0, kept.ramp_duration, method=method)
-        errors[method] = prediction_errors(method, exact_kept, prediction)
+    exact = predict_exact(params, *strides.columns())
+    index = np.flatnonzero(successful(exact))[:keep]
+    kept, exact_kept = strides.subset(index), exact.take(index)
+    errors = {method: prediction_errors(method, exact_kept, predict_stride(params, *kept.columns(), method=method))
+              for method in methods}
     return Comparison(kept, count, exact_kept, errors)
+
+
+def time_predictors(params: ModelParams, strides: StrideSet, repeats: int = 3) -> dict[str, tuple[float, float]]:
+    """Cost of each model on the same strides, one run: method -> (microseconds per single
+    stride, batched strides per second; NaN for the exact model, which has no batch)."""
+    columns = strides.columns()
+    rows = [tuple(float(c[i]) for c in columns) for i in range(len(strides))]
+    models = {"exact": simulate_stride, "aas": predict_aas, "corrected": predict_corrected}
+    out = {}
+    for name, model in models.items():
+        start = time.perf_counter()
+        for row in rows:
+            model(params, *row)
+        single = (time.perf_counter() - start) / len(rows) * 1e6
+        batch = math.nan
+        if name != "exact":
+            best = math.inf
+            for _ in range(repeats):
+                start = time.perf_counter()
+                model(params, *columns)
+                best = min(best, time.perf_counter() - start)
+            batch = len(rows) / best
+        out[name] = (single, batch)
+    return out
 
 
 def breakdown(comparison: Comparison, variable: str, edges) -> list[dict]:

@@ -8,7 +8,6 @@ angle, speed, torque and apex height (where each predictor breaks down), and plo
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import matplotlib
@@ -19,33 +18,13 @@ import numpy as np  # noqa: E402
 
 from hopper_ros.physics.aas import predict_aas  # noqa: E402
 from hopper_ros.physics.corrected import predict_corrected  # noqa: E402
-from hopper_ros.physics.evaluation import THESIS_RANGES, breakdown, compare_predictors, prediction_errors  # noqa: E402
+from hopper_ros.physics.evaluation import (THESIS_RANGES, breakdown, compare_predictors,  # noqa: E402
+                                           prediction_errors, time_predictors)
 from hopper_ros.physics.exact import simulate_stride  # noqa: E402
 from hopper_ros.physics.params import ModelParams  # noqa: E402
 from hopper_ros.physics.trajectory import predicted_trajectory  # noqa: E402
 
 LABELS = {"aas": "AAS (thesis, corrected typos)", "corrected": "corrected AAS (default)"}
-
-
-def _timing(params, strides, count=200):
-    rows = [tuple(float(getattr(strides, f)[i]) for f in ("apex_height", "forward_speed", "touchdown_angle", "tau_0", "ramp_duration"))
-            for i in range(min(count, len(strides)))]
-    columns = tuple(np.array(c) for c in zip(*rows))
-    out = {}
-    for name, function in (("exact", lambda *r: simulate_stride(params, *r)),
-                           ("aas", lambda *r: predict_aas(params, *r)),
-                           ("corrected", lambda *r: predict_corrected(params, *r))):
-        start = time.perf_counter()
-        for row in rows:
-            function(*row)
-        single = (time.perf_counter() - start) / len(rows) * 1e6
-        batch = math.nan
-        if name != "exact":
-            start = time.perf_counter()
-            function(*columns)
-            batch = len(rows) / (time.perf_counter() - start)
-        out[name] = (single, batch)
-    return out
 
 
 def _liftoff_comparison(params, comparison):
@@ -77,7 +56,7 @@ def write_predictor_report(out_dir: str | Path, params: ModelParams | None = Non
     comparison = compare_predictors(params, count, seed)
     s = comparison.strides
     errors = comparison.errors
-    timing = _timing(params, s)
+    timing = time_predictors(params, s.subset(slice(0, 200)))
     ablation = []
     for label, sweeps in (("+ full torque and gravity impulse at lift-off", 0), ("+ one perturbation sweep", 1),
                           ("+ two sweeps (default)", 2)):
