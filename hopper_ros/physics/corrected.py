@@ -33,6 +33,7 @@ from numpy.polynomial import chebyshev
 
 from ._backend import ARRAY as xp
 from .aas import _APEX_BELOW, _NO_FLIGHT, _NONE, StanceSolution, _finish, full_ramp_impulse, predict_aas
+from .exact import ramp_torque
 from .params import ModelParams
 
 NODES = 8
@@ -125,7 +126,7 @@ def predict_corrected(params: ModelParams, apex_height, forward_speed, touchdown
     force_T = k * (rho_0 - rho_T) - d * rate_T
     force_rate_T = -k * rate_T - d * accel_T
     step = -force_T / np.where(force_rate_T != 0.0, force_rate_T, -1.0)
-    torque_T = np.where(span_T < t_f, -tau_0 * (1.0 - span_T / np.maximum(t_f, 1e-12)), 0.0)
+    torque_T = ramp_torque(span_T, tau_0, t_f)
     t_lo = span_T + step
     rho_lo = rho_T + rate_T * step + 0.5 * accel_T * step * step
     rho_dot_lo = rate_T + accel_T * step

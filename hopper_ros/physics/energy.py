@@ -175,12 +175,11 @@ def corrected_stance_energy(params: ModelParams, prediction, tau_0):
     _, cumulative = chebyshev_nodes(c.t.shape[-1])
     span = c.t[..., -1]
     weights = cumulative[-1] * span[..., None]                  # int_0^T f ~= sum_j w_j f(t_j)
-    torque = lambda t: -tau_0[..., None] * np.clip(1.0 - t / ramp[..., None], 0.0, None)
-    power = torque(c.t) * c.momentum / (m * c.leg_length ** 2)
+    power = ramp_torque(c.t, tau_0[..., None], ramp[..., None]) * c.momentum / (m * c.leg_length ** 2)
     dissipation = d * c.leg_rate ** 2
     t_lo = np.asarray(prediction.stance_time, dtype=float)
     tail = 0.5 * (t_lo - span)
-    power_lo = torque(t_lo[..., None])[..., 0] * np.asarray(prediction.liftoff_theta_dot)
+    power_lo = ramp_torque(t_lo, tau_0, ramp) * np.asarray(prediction.liftoff_theta_dot)
     work = np.sum(weights * power, axis=-1) + tail * (power[..., -1] + power_lo)
     loss = np.sum(weights * dissipation, axis=-1) + tail * (dissipation[..., -1] + d * np.asarray(prediction.liftoff_rho_dot) ** 2)
     return work, loss

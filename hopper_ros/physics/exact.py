@@ -147,12 +147,14 @@ class StrideResult:
 
 
 def ramp_torque(t_stance, tau_0, ramp_duration):
-    """Applied hip torque of (2.32) with the robot's sign: -tau_0 (1 - t/t_f) on [0, t_f]."""
-    t_stance = np.asarray(t_stance, dtype=float)
-    if ramp_duration <= 0.0:
-        return np.zeros_like(t_stance)
-    inside = (t_stance >= 0.0) & (t_stance <= ramp_duration)
-    return np.where(inside, -tau_0 * (1.0 - t_stance / ramp_duration), 0.0)
+    """Applied hip torque of (2.32) with the robot's sign: -tau_0 (1 - t/t_f) on [0, t_f], 0 after.
+
+    Broadcasts over arrays of times, torques and ramp durations.
+    """
+    t = np.asarray(t_stance, dtype=float)
+    t_f = np.asarray(ramp_duration, dtype=float)
+    inside = (t >= 0.0) & (t < t_f)
+    return np.where(inside, -np.asarray(tau_0) * (1.0 - t / np.where(inside, t_f, 1.0)), 0.0)
 
 
 def polar_to_cartesian_velocity(rho, theta, rho_dot, theta_dot):
@@ -177,7 +179,7 @@ def _stance_rhs(params: ModelParams, tau_0: float, ramp_duration: float, with_to
 
     def rhs(t, state):
         rho, theta, rho_dot, theta_dot = state
-        torque = -tau_0 * (1.0 - t / ramp_duration) if with_torque else 0.0
+        torque = -tau_0 * (1.0 - t / ramp_duration) if with_torque else 0.0   # (2.32), inline: scalar hot path
         rho_ddot = rho * theta_dot * theta_dot - g * cos(theta) - k_m * (rho - rho_0) - d_m * rho_dot
         theta_ddot = (g * rho * sin(theta) + torque / m - 2.0 * rho * rho_dot * theta_dot) / (rho * rho)
         return [rho_dot, theta_dot, rho_ddot, theta_ddot]
