@@ -5,6 +5,7 @@ from __future__ import annotations
 import yaml
 
 from hopper_ros.cli import COMMANDS, build_parser
+from hopper_ros.nodes.registry import NODES
 
 
 def test_subcommands_come_from_one_table():
@@ -18,7 +19,8 @@ def test_subcommands_come_from_one_table():
 def test_run_unknown_node_lists_the_known_ones(hopper_cli):
     process = hopper_cli("run", "no_such_node")
     assert process.wait() == 2
-    assert "unknown node 'no_such_node'; registered nodes: setpoint_scheduler" in process.stderr
+    known = ", ".join(sorted(NODES))
+    assert f"unknown node 'no_such_node'; registered nodes: {known}" in process.stderr
 
 
 def test_topic_echo_and_list_see_a_running_graph(rclpy_session, hopper_cli):

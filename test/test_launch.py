@@ -11,6 +11,7 @@ import textwrap
 import pytest
 
 from hopper_ros.launcher import LaunchFileError, load_launch, parse_launch
+from hopper_ros.nodes.registry import NODES
 
 STARTED_CHILD = r"^\[launch\] started {}: pid (\d+)$"
 
@@ -63,7 +64,7 @@ def test_entry_fields_become_ros_arguments(tmp_path):
 @pytest.mark.parametrize(
     "data, message",
     [
-        ({"nodes": [{"node": "nope"}]}, "entry 1 (nope): unknown node 'nope'; registered nodes: setpoint_scheduler"),
+        ({"nodes": [{"node": "nope"}]}, f"entry 1 (nope): unknown node 'nope'; registered nodes: {', '.join(sorted(NODES))}"),
         ({"nodes": [{"name": "x"}]}, "entry 1: missing 'node'"),
         ({"nodes": [{"node": "setpoint_scheduler", "remap": {}}]}, "entry 1 (setpoint_scheduler): unknown key(s) 'remap'"),
         ({"nodes": [{"node": "setpoint_scheduler"}, {"node": "setpoint_scheduler"}]}, "entry 2 (setpoint_scheduler): label 'setpoint_scheduler' is already used by entry 1"),

@@ -9,7 +9,8 @@ A node module defines its `rclpy.node.Node` subclass (a thin adapter over a plai
 initialises rclpy with `args` (None: `sys.argv`, so `--ros-args ...` work as with `ros2 run`),
 builds the node, logs one startup line (pid, domain id, discovery range) and spins it on a
 SingleThreadedExecutor. SIGINT and SIGTERM both end the spin (unless the parent process had
-set them to be ignored); the node is destroyed, rclpy shut down and 0 returned. A node that cannot start (bad configuration) or whose callback raises makes
+set them to be ignored), and so does a node setting its attribute `finished` (its work is done;
+it should trigger a guard condition to wake the executor); the node is destroyed, rclpy shut down and 0 returned. A node that cannot start (bad configuration) or whose callback raises makes
 it return 1.
 """
 
@@ -134,7 +135,7 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
             )
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            while stop.received is None and node.context.ok():
+            while stop.received is None and node.context.ok() and not getattr(node, "finished", False):
                 executor.spin_once(timeout_sec=_SPIN_PERIOD)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

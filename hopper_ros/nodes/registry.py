@@ -8,4 +8,5 @@ CMake build reads it for the `ros2 run` wrappers. It must stay importable withou
 NODES = {
     "setpoint_scheduler": "hopper_ros.nodes.setpoint_scheduler:main",
     "stride_predictor": "hopper_ros.nodes.stride_predictor:main",
+    "sim_robot": "hopper_ros.nodes.sim_robot:main",
 }

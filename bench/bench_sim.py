@@ -1,0 +1,109 @@
+"""The simulated robot's speed, all effects on (config/sim.yaml's effects, every one enabled).
+
+- sim_realtime_factor: the sim_robot node in its own process, lockstep mode, running section
+  4.1's single-stride experiments itself: simulated time over wall time, with everything a
+  period costs (physics, regulator, UDP packet, force plate and ground truth published on ROS).
+  Target >= 5.
+- sim_period_p50_us / sim_period_p99_us: cost of one 1 ms period in Python alone (SimRobot.step
+  with the experiment, packet encoded and sent over UDP), distribution over the run.
+- sim_vs_exact_max_err_pct: largest apex-to-apex difference (height or speed) between the
+  lockstep sim with the extra effects off and the exact model at the same inputs (target < 0.1).
+"""
+import math
+import os
+import re
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from hopper_ros.config import load_yaml  # noqa: E402
+from hopper_ros.hardware import packet as packet_format  # noqa: E402
+from hopper_ros.physics.evaluation import sample_thesis_strides  # noqa: E402
+from hopper_ros.physics.exact import simulate_stride  # noqa: E402
+from hopper_ros.sim.config import EFFECTS, load_sim_config  # noqa: E402
+from hopper_ros.sim.experiment import ExperimentSeries, StrideExperiment, drive_hold  # noqa: E402
+from hopper_ros.sim.robot import SimRobot  # noqa: E402
+
+
+def _percentile(values, fraction):
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, max(0, math.ceil(fraction * len(ordered)) - 1))]
+
+
+def node_realtime_factor(duration: float) -> float:
+    effects = "[" + ", ".join(EFFECTS) + "]"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sink:
+        sink.bind(("127.0.0.1", 0))
+        command = [sys.executable, "-m", "hopper_ros.cli", "run", "sim_robot", "--ros-args",
+                   "-p", "mode:=lockstep", "-p", "can:=none", "-p", "experiments:=true",
+                   "-p", f"duration:={duration}", "-p", f"enable_effects:={effects}",
+                   "-p", f"udp_port:={sink.getsockname()[1]}"]
+        result = subprocess.run(command, cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    match = re.search(r"real-time factor ([0-9.]+)", result.stderr)
+    if result.returncode != 0 or not match:
+        raise RuntimeError(f"sim_robot failed ({result.returncode}):\n{result.stderr[-2000:]}")
+    return float(match.group(1))
+
+
+def period_costs(duration: float) -> list[float]:
+    hardware = load_yaml("hardware.yaml")
+    config = load_sim_config().with_effects(**{name: True for name in EFFECTS})
+    robot = SimRobot(config, hardware)
+    series = ExperimentSeries(robot, seed=3)
+    costs = []
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sink:
+        sink.bind(("127.0.0.1", 0))
+        address = sink.getsockname()
+        for _ in range(int(duration / config.period)):
+            start = time.perf_counter()
+            if robot.experiment is None or robot.experiment.done:
+                series.start_next()
+            sample = robot.step()
+            sender.sendto(packet_format.encode(sample.packet), address)
+            costs.append(time.perf_counter() - start)
+    return costs
+
+
+def exact_agreement(count: int) -> float:
+    hardware = load_yaml("hardware.yaml")
+    config = load_sim_config().all_effects_off()
+    params = config.model_params()
+    worst = 0.0
+    for apex_height, speed, angle, tau_0, ramp in zip(*sample_thesis_strides(params, count, seed=11).columns()):
+        robot = SimRobot(config, hardware)
+        robot.throw(apex_height, speed, angle)
+        experiment = StrideExperiment(tau_0, angle, ramp, drive_hold(hardware), config.pre_touchdown_height)
+        robot.run_experiment(experiment)
+        robot.run_until(lambda sample: experiment.done, 3.0)
+        realised = experiment.event("touchdown")
+        if realised is None or experiment.fell:
+            continue
+        exact = simulate_stride(params, apex_height, speed, realised.leg_angle, tau_0, ramp)
+        if not exact.ok:
+            continue
+        apex = experiment.next_apex
+        worst = max(worst, abs(apex.z / exact.next_apex.z - 1.0), abs(apex.ydot / exact.next_apex.ydot - 1.0))
+    return 100.0 * worst
+
+
+def run(quick=False):
+    costs = period_costs(2.0 if quick else 10.0)
+    return [
+        {"name": "sim_realtime_factor", "value": node_realtime_factor(5.0 if quick else 30.0), "unit": "x"},
+        {"name": "sim_period_p50_us", "value": 1e6 * _percentile(costs, 0.5), "unit": "us"},
+        {"name": "sim_period_p99_us", "value": 1e6 * _percentile(costs, 0.99), "unit": "us"},
+        {"name": "sim_vs_exact_max_err_pct", "value": exact_agreement(20 if quick else 100), "unit": "%"},
+    ]
+
+
+if __name__ == "__main__":
+    for figure in run(quick="--quick" in sys.argv):
+        print(figure)

@@ -1,0 +1,4 @@
+"""CAN bus side of the hip drive: maxon EPOS2 constants (`epos2_objects`), an emulated EPOS2
+(`epos2_emulator`, its position regulator in `epos2_regulator`) and a loopback-only socketcand
+hub (`socketcand_server`) that lets other processes reach an in-process python-can bus. No ROS.
+"""

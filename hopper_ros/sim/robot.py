@@ -1,0 +1,191 @@
+"""The simulated robot, one 1 ms period at a time: plant, hip motor, drive, sensors, force plate.
+
+Per period (`SimRobot.step`):
+1. the hip command for the period: from the emulated EPOS2 (`drive`, commanded over CAN by the
+   motor driver: poll its frames, run its control cycle -> current demand), or from the built-in
+   single-stride experiment (`experiment`, section 4.1, no CAN), or none (motor off);
+2. the plant integrates the period with that hip torque (actuation delay and torque saturation
+   applied here when on);
+3. the sensors sample the end of the period: the three encoder counts (quantised, optional noise)
+   and the motor current go into one microcontroller packet; the force plate samples the ground
+   reaction force.
+
+The microcontroller clock is the simulation clock (plus a start offset), so lockstep runs
+produce the same packets as real-time runs, only faster.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+from hopper_ros.hardware.encoders import BoomKinematics, to_register
+from hopper_ros.hardware.motor import HipMotor
+from hopper_ros.hardware.packet import EncoderPacket
+from hopper_ros.physics.exact import Phase
+
+from .config import SimConfig
+from .plant import Plant, PlantEvent
+
+MCU_CLOCK_START_US = 1_000_000  # the microcontroller has been up for a second when the sim starts
+
+
+@dataclass(frozen=True)
+class GroundForce:
+    """One force plate sample: force of the ground on the robot [N], centre of pressure [m]."""
+
+    t: float
+    forward: float
+    vertical: float
+    center_of_pressure: float
+    contact: bool
+
+
+@dataclass(frozen=True)
+class TrueState:
+    """Ground truth at the end of a period, for tests and for the mismatch tool's proofs."""
+
+    t: float
+    y: float
+    z: float
+    ydot: float
+    zdot: float
+    leg_angle: float
+    leg_rate: float
+    phase: Phase
+    in_contact: bool
+    hip_torque: float
+    fallen: bool
+
+
+@dataclass
+class SimSample:
+    packet: EncoderPacket
+    force: GroundForce
+    truth: TrueState
+    events: list[PlantEvent] = field(default_factory=list)
+
+
+class CommandHistory:
+    """Piecewise-constant command (one value per period) read back `delay` seconds late."""
+
+    def __init__(self, delay: float) -> None:
+        self.delay = delay
+        self._entries: deque[tuple[float, float]] = deque(maxlen=max(4, int(delay / 1e-4) + 4))
+
+    def push(self, t_start: float, value: float) -> None:
+        self._entries.append((t_start, value))
+
+    def __call__(self, t: float) -> float:
+        when = t - self.delay
+        for t_start, value in reversed(self._entries):
+            if t_start <= when + 1e-12:
+                return value
+        return 0.0
+
+
+class SimRobot:
+    """The robot: `throw` it to an apex, then `step` once per period."""
+
+    def __init__(self, config: SimConfig, hardware: Mapping[str, Any], *, drive=None) -> None:
+        self.config = config
+        self.hardware = hardware
+        self.kinematics = BoomKinematics.from_config(hardware)
+        self.motor = HipMotor.from_config(hardware)
+        self.plant = Plant(config, self.motor.leg_inertia_total, self.motor.leg_friction)
+        self.drive = drive
+        self.experiment = None
+        self.period = config.period
+        self.sequence = 0
+        self.delay = config.value("actuation_delay", "delay")
+        self.torque_limit = config.value("torque_saturation", "max_torque") or math.inf
+        self._current = CommandHistory(self.delay)   # actual motor current: the demand, `delay` late
+        self._rng = random.Random(config.seed)
+        self._count_noise = config.sensor("encoder_noise", "counts")
+        self._current_noise = config.sensor("current_noise", "current")
+        self._force_noise = config.sensor("force_plate_noise", "force")
+
+    # ------------------------------------------------------------------ set-up
+    def throw(self, apex_height: float, forward_speed: float, leg_angle: float, y: float = 0.0) -> None:
+        """Put the robot at an apex (z' = 0) with the leg at `leg_angle`, as the thesis's throw."""
+        self.plant.throw(apex_height, forward_speed, leg_angle, y=y, t=self.plant.t)
+
+    def run_experiment(self, experiment) -> None:
+        """Let the built-in single-stride experiment command the hip (instead of the drive)."""
+        self.experiment = experiment
+        experiment.attach(self)
+
+    @property
+    def t(self) -> float:
+        return self.plant.t
+
+    # ------------------------------------------------------------------ one period
+    def hip_torque(self, current: float) -> float:
+        """Torque reaching the leg from a motor current, after the transmission's saturation."""
+        torque = self.motor.torque(current)
+        return max(-self.torque_limit, min(self.torque_limit, torque))
+
+    def step(self) -> SimSample:
+        plant = self.plant
+        t0 = plant.t
+        demand = 0.0
+        if self.drive is not None:
+            counts = self.kinematics.motor.count(plant.leg_angle)
+            self.drive.poll(t0)
+            demand = self.drive.control(t0, counts, self.motor.motor_speed_rpm(plant.leg_rate), self._current(t0))
+        elif self.experiment is not None:
+            demand = self.experiment.current_demand(t0)
+        demand = max(-self.motor.current_limit, min(self.motor.current_limit, demand))
+        self._current.push(t0, demand)
+        if self.experiment is not None and self.drive is None:
+            torque = self.experiment.torque_function(self._current, self.hip_torque, self.delay)
+        else:
+            current = self._current
+            torque = lambda t: self.hip_torque(current(t))  # noqa: E731 - per-period closure
+        events = plant.advance(self.period, torque)
+        if self.experiment is not None:
+            self.experiment.on_events(events)
+        return self._sample(events)
+
+    def _sample(self, events: list[PlantEvent]) -> SimSample:
+        plant, k = self.plant, self.kinematics
+        s = plant.state
+        azimuth, elevation, motor = k.counts(s[0], s[1], s[4])
+        if self._count_noise:
+            gauss, noise = self._rng.gauss, self._count_noise
+            azimuth += round(gauss(0.0, noise))
+            elevation += round(gauss(0.0, noise))
+            motor += round(gauss(0.0, noise))
+        current = self._current(plant.t)
+        if self._current_noise:
+            current += self._rng.gauss(0.0, self._current_noise)
+        self.sequence = (self.sequence + 1) & 0xFFFFFFFF
+        packet = EncoderPacket(
+            sequence=self.sequence,
+            mcu_time_us=MCU_CLOCK_START_US + round(plant.t * 1e6),
+            azimuth_counts=to_register(azimuth), elevation_counts=to_register(elevation),
+            motor_counts=to_register(motor), motor_current_ma=round(current * 1000.0),
+        )
+        forward, vertical = plant.ground_reaction_force()
+        if self._force_noise:
+            forward += self._rng.gauss(0.0, self._force_noise)
+            vertical += self._rng.gauss(0.0, self._force_noise)
+        contact = vertical > self.config.contact_threshold
+        force = GroundForce(plant.t, forward, vertical, plant.toe_y if plant.in_contact else math.nan, contact)
+        truth = TrueState(plant.t, s[0], s[1], s[2], s[3], s[4], s[5], plant.phase, plant.in_contact,
+                          plant.torque_now, plant.fallen)
+        return SimSample(packet, force, truth, events)
+
+    def run_until(self, condition: Callable[[SimSample], bool], max_time: float) -> list[SimSample]:
+        """Step until `condition(sample)` holds or `max_time` seconds pass; returns the samples."""
+        samples = []
+        end = self.plant.t + max_time
+        while self.plant.t < end - 1e-12:
+            sample = self.step()
+            samples.append(sample)
+            if condition(sample):
+                break
+        return samples

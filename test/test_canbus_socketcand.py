@@ -1,0 +1,215 @@
+"""The loopback-only socketcand hub (hopper_ros.canbus.socketcand_server).
+
+python-can's own socketcand client talks to it over TCP on 127.0.0.1: frames between clients
+and the in-process bus in both directions (11- and 29-bit identifiers, empty frames, error
+frames), garbage and disconnects survived, non-loopback binds refused. Then the acceptance
+run: the emulated EPOS2 behind the hub in this process, the independent `canopen` library as
+master in another process (test/data/socketcand_canopen_master.py).
+"""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import pytest
+
+from hopper_ros.canbus import epos2_objects as eo
+from hopper_ros.canbus.epos2_objects import State
+from hopper_ros.canbus.socketcand_server import SocketcandServer, format_frame, loopback_host, parse_send
+from test_canbus_epos2 import EDS, HARDWARE, NODE, DriveLoop
+
+DATA = Path(__file__).resolve().parent / "data"
+TIMEOUT = 10.0
+
+
+@pytest.fixture
+def hub():
+    server = SocketcandServer(host="127.0.0.1", port=0, channel="can0").start()
+    yield server
+    server.close()
+
+
+def client(server: SocketcandServer, channel: str = "can0") -> can.BusABC:
+    return can.Bus(interface="socketcand", host="127.0.0.1", port=server.port, channel=channel)
+
+
+def recv_until(bus: can.BusABC, predicate, timeout: float = TIMEOUT) -> can.Message:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        msg = bus.recv(timeout=0.05)
+        if msg is not None and predicate(msg):
+            return msg
+    raise AssertionError("expected frame not received")
+
+
+def wait(condition, timeout: float = TIMEOUT) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if condition():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+@pytest.mark.parametrize("host", ["0.0.0.0", "", "192.168.1.10", "10.0.0.1", "::1", "::", "example.com"])
+def test_refuses_non_loopback_bind(host):
+    with pytest.raises(ValueError, match="loopback only"):
+        SocketcandServer(host=host, port=0)
+
+
+def test_loopback_names_accepted():
+    assert loopback_host("localhost") == "127.0.0.1"
+    assert loopback_host("127.0.0.2") == "127.0.0.2"
+    server = SocketcandServer(host="localhost", port=0)
+    assert server.address[0] == "127.0.0.1" and server.port > 0
+    server.close()
+    server.close()                                                  # idempotent
+
+
+def test_protocol_text_matches_python_can_client():
+    from can.interfaces.socketcand.socketcand import (
+        convert_ascii_message_to_can_message, convert_can_message_to_ascii_message)
+
+    for msg in (can.Message(arbitration_id=0x181, data=b"\x37\x01\xff", is_extended_id=False),
+                can.Message(arbitration_id=0x080, data=b"", is_extended_id=False),
+                can.Message(arbitration_id=0x1ABCDE12, data=bytes(range(8)), is_extended_id=True)):
+        parsed = convert_ascii_message_to_can_message(format_frame(msg))
+        assert (parsed.arbitration_id, bytes(parsed.data), parsed.is_extended_id) == \
+            (msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
+        sent = convert_can_message_to_ascii_message(msg)[1:-1].split()
+        back = parse_send(sent)
+        assert (back.arbitration_id, bytes(back.data), back.is_extended_id) == \
+            (msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
+    error = convert_ascii_message_to_can_message(format_frame(can.Message(arbitration_id=0x4, is_error_frame=True)))
+    assert error.is_error_frame
+    assert format_frame(can.Message(arbitration_id=0x181, is_remote_frame=True, is_extended_id=False)) is None
+    for bad in (["send", "800", "1", "1"], ["send", "123", "9"] + ["0"] * 9, ["send", "123", "2", "1"],
+                ["send", "123", "1", "zz"], ["send", "123", "1", "100"], ["send", "123456789", "0"],
+                ["send", "-1", "0"], ["send", "123"]):
+        with pytest.raises(ValueError):
+            parse_send(bad)
+
+
+def test_frames_between_clients_and_the_local_bus(hub):
+    local = hub.local_bus()
+    a, b = client(hub), client(hub)
+    try:
+        assert wait(lambda: hub.client_count == 2)
+        time.sleep(0.15)                                            # past the rawmode grace
+        a.send(can.Message(arbitration_id=0x601, data=b"\x40\x00\x10\x00\x00\x00\x00\x00", is_extended_id=False))
+        got = recv_until(b, lambda m: m.arbitration_id == 0x601)
+        assert bytes(got.data) == b"\x40\x00\x10\x00\x00\x00\x00\x00" and not got.is_extended_id
+        got = recv_until(local, lambda m: m.arbitration_id == 0x601)
+        assert got.dlc == 8 and not got.is_extended_id
+        a.send(can.Message(arbitration_id=0x1ABCDE12, data=b"\x01", is_extended_id=True))
+        got = recv_until(b, lambda m: m.arbitration_id == 0x1ABCDE12)
+        assert got.is_extended_id and bytes(got.data) == b"\x01"
+        local.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))        # SYNC
+        for bus in (a, b):
+            got = recv_until(bus, lambda m: m.arbitration_id == 0x080)
+            assert got.dlc == 0
+        local.send(can.Message(arbitration_id=0x20000004, is_error_frame=True))
+        assert recv_until(a, lambda m: m.is_error_frame).is_error_frame
+        assert a.recv(timeout=0.1) is None or True                  # nothing of its own comes back
+        assert hub.counters.garbage_commands == 0
+        assert hub.counters.frames_from_clients == 2
+    finally:
+        a.shutdown()
+        b.shutdown()
+    assert wait(lambda: hub.client_count == 0)
+
+
+def test_wrong_channel_is_refused(hub):
+    with pytest.raises(can.CanError):
+        client(hub, channel="vcan7")
+
+
+def raw_client(server: SocketcandServer) -> socket.socket:
+    sock = socket.create_connection(("127.0.0.1", server.port), timeout=TIMEOUT)
+    assert sock.recv(64) == b"< hi >"
+    sock.sendall(b"< open can0 >")
+    assert sock.recv(64) == b"< ok >"
+    sock.sendall(b"< rawmode >")
+    assert sock.recv(64) == b"< ok >"
+    return sock
+
+
+def test_garbage_and_disconnects_are_survived(hub):
+    good = client(hub)
+    local = hub.local_bus()
+    try:
+        bad = raw_client(hub)
+        junk = [b"hello there", b"< send 800 1 1 >", b"< send 123 9 0 0 0 0 0 0 0 0 0 >", b"< send 123 2 1 >",
+                b"< send 123 1 zz >", b"< bogus command >", b"<>", b"\xff\xfe\x00< send 123 1 1 2 >",
+                b"< open can0 >", b"< send 12 1 5 "]
+        for chunk in junk:
+            bad.sendall(chunk)
+        bad.sendall(b">< send 1A5 2 de ad >< echo >")               # completes the last, then a good one
+        assert bad.recv(64).startswith(b"< echo >")
+        got = recv_until(good, lambda m: m.arbitration_id == 0x1A5)
+        assert bytes(got.data) == b"\xde\xad"
+        recv_until(local, lambda m: m.arbitration_id == 0x1A5)
+        assert hub.counters.garbage_commands >= 9
+        bad.close()                                                  # abrupt disconnect
+        endless = raw_client(hub)
+        endless.sendall(b"< send " + b"1" * 1000)                     # never terminated: closed
+        endless.settimeout(TIMEOUT)
+        assert endless.recv(64) == b""
+        endless.close()
+        half = socket.create_connection(("127.0.0.1", hub.port), timeout=TIMEOUT)
+        half.close()                                                  # gone before the handshake
+        assert wait(lambda: hub.client_count == 1)
+        local.send(can.Message(arbitration_id=0x701, data=b"\x05", is_extended_id=False))
+        assert bytes(recv_until(good, lambda m: m.arbitration_id == 0x701).data) == b"\x05"
+    finally:
+        good.shutdown()
+
+
+def test_canopen_master_in_another_process_drives_the_emulated_epos2():
+    with SocketcandServer(host="127.0.0.1", port=0, channel=HARDWARE["can"]["channel"]) as hub:
+        with DriveLoop(hub.local_bus()) as loop:
+            child = subprocess.Popen(
+                [sys.executable, str(DATA / "socketcand_canopen_master.py"), str(hub.port), str(EDS), str(NODE)],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+            lines: list[tuple[str, str]] = []
+            try:
+                for line in child.stdout:
+                    key, _, value = line.strip().partition(" ")
+                    lines.append((key, value))
+                    if key == "inject":
+                        with loop.lock:
+                            loop.drive.inject_fault(int(value, 16), loop.now())
+                        child.stdin.write("\n")
+                        child.stdin.flush()
+                status = child.wait(TIMEOUT)
+            finally:
+                if child.poll() is None:
+                    child.kill()
+                    child.wait(TIMEOUT)
+            stderr = child.stderr.read()
+            assert status == 0, f"{lines}\n{stderr}"
+            got = dict(lines)
+            statuswords = [v for k, v in lines if k == "statusword"]
+            assert [v for k, v in lines if k == "heartbeat"] == ["PRE-OPERATIONAL", "OPERATIONAL"]
+            assert got["device_type"] == "0x20192" and got["device_name"] == "EPOS2"
+            assert got["rpdo1"] == "Controlword,Current_mode_setting_value"
+            assert statuswords[:3] == ["0x121", "0x123", "0x137"]       # ready, switched on, enabled
+            assert int(got["moved"]) > 1000                              # 1.5 A for 0.2 s turns the motor
+            assert int(got["current_averaged"]) == pytest.approx(1500, abs=50)
+            assert statuswords[3:] == ["0x108", "0x140", "0x140"]        # fault, reset, reset
+            assert got["error_code"] == "0x2310" and got["abort"] == "0x6020000"
+            assert [v for k, v in lines if k == "emcy"] == ["0x2310", "0x8210"]
+            assert got["done"] == "ok"
+            # the drive's side of the same run
+            with loop.lock:
+                drive = loop.drive
+                assert loop.peak_demand == pytest.approx(1.5)
+                assert drive.state is State.SWITCH_ON_DISABLED and drive.malformed_frames == 1
+                assert drive.counters.emcy_sent >= 4                     # 2 errors, 2 resets
+                assert drive.value(eo.ERROR_HISTORY, 1) == 0x8210 and drive.value(eo.ERROR_HISTORY, 2) == 0x2310
+            assert hub.counters.frames_from_clients > 20 and hub.counters.garbage_commands == 0

@@ -1,0 +1,184 @@
+"""sim_robot as a process: UDP encoder packets, force plate and ground truth on real topics."""
+
+from __future__ import annotations
+
+import signal
+import socket
+import time
+
+import numpy as np
+import pytest
+
+from conftest import REPO, SAFETY_TIMEOUT, free_port, spin_until
+from hopper_ros.hardware import packet as packet_format
+
+
+def receive_packets(sock: socket.socket, count: int, timeout: float = SAFETY_TIMEOUT) -> list[bytes]:
+    sock.settimeout(1.0)
+    packets = []
+    end = time.monotonic() + timeout
+    while len(packets) < count and time.monotonic() < end:
+        try:
+            packets.append(sock.recv(2048))
+        except socket.timeout:
+            continue
+    return packets
+
+
+def latest_packets(sock: socket.socket, count: int) -> list:
+    """Drop what queued up in the socket, then decode the next `count` packets."""
+    sock.setblocking(False)
+    try:
+        while True:
+            sock.recv(2048)
+    except BlockingIOError:
+        pass
+    sock.setblocking(True)
+    return [packet_format.decode(data) for data in receive_packets(sock, count)]
+
+
+def stance_seen(forces) -> bool:
+    """A whole stance on the plate: contact, then none."""
+    first = next((i for i, f in enumerate(forces) if f.contact), None)
+    return first is not None and any(not f.contact for f in forces[first:])
+
+
+def test_node_streams_packets_force_plate_and_true_events(rclpy_session, hopper_cli):
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hopper_ros.msg import ApexState, BodyState, GaitEvent, GroundReactionForce, NodeDiagnostics
+
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    udp.bind(("127.0.0.1", 0))
+    node = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=none", "-p", f"udp_port:={udp.getsockname()[1]}")
+    node.wait_for_line(r"realtime at 1000 Hz, packets to 127.0.0.1")
+    test_node = rclpy_session.create_node("sim_robot_test")
+    executor = SingleThreadedExecutor()
+    executor.add_node(test_node)
+    got = {"force": [], "truth": [], "events": [], "diagnostics": []}
+    test_node.create_subscription(GroundReactionForce, "force_plate", got["force"].append, 1000)
+    test_node.create_subscription(BodyState, "sim/truth", got["truth"].append, 1000)
+    test_node.create_subscription(GaitEvent, "sim/events", got["events"].append, 100)
+    test_node.create_subscription(NodeDiagnostics, "diagnostics", got["diagnostics"].append, 10)
+    try:
+        started = time.monotonic()
+        packets = [packet_format.decode(data) for data in receive_packets(udp, 1500)]
+        elapsed = time.monotonic() - started
+        assert len(packets) == 1500
+        assert elapsed > 1.2                        # real time: 1500 periods take 1.5 s
+        sequences = np.array([p.sequence for p in packets])
+        assert (np.diff(sequences) == 1).mean() > 0.999   # loopback UDP loses nothing in practice
+        clock = np.array([p.mcu_time_us for p in packets])
+        assert set(np.diff(clock) / np.diff(sequences)) == {1000.0}
+        # once connected, throw the robot again (with the motor off its first stride is its last)
+        throw = test_node.create_publisher(ApexState, "sim/throw", 10)
+        assert spin_until(executor, lambda: test_node.count_publishers("sim/events") and throw.get_subscription_count())
+        got["events"].clear()
+        throw.publish(ApexState(apex_height=0.38, forward_speed=1.5, leg_angle=0.25))
+        kinds = {GaitEvent.TOUCHDOWN, GaitEvent.LIFTOFF, GaitEvent.APEX}
+        assert spin_until(executor, lambda: kinds <= {e.type for e in got["events"]} and got["diagnostics"]
+                          and stance_seen(got["force"]) and len(got["truth"]) > 500)
+        stance_force = max(f.force_vertical for f in got["force"])
+        assert stance_force > 50.0                  # the robot landed on the plate
+        report = got["diagnostics"][-1]
+        assert report.node_name == "/sim_robot" and "periods" in report.counter_names
+        assert 0.8 < report.values[list(report.value_names).index("realtime_factor")] < 1.2
+    finally:
+        node.signal(signal.SIGINT)
+        assert node.wait() == 0
+        executor.shutdown()
+        test_node.destroy_node()
+        udp.close()
+
+
+def test_lockstep_runs_faster_than_real_time_and_ends_after_its_duration(hopper_cli):
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    udp.bind(("127.0.0.1", 0))
+    udp.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+    node = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=none", "-p", "mode:=lockstep",
+                      "-p", "duration:=3.0", "-p", f"udp_port:={udp.getsockname()[1]}")
+    node.wait_for_line(r"lockstep at 1000 Hz")
+    started = time.monotonic()
+    node.wait_for_line(r"simulated 3\.000 s: done")
+    assert time.monotonic() - started < 3.0 / 2     # at least twice real time even on a busy machine
+    assert node.wait() == 0                         # ends by itself
+    packets = receive_packets(udp, 3000, timeout=5.0)
+    assert len(packets) >= 2500                     # the socket buffer may drop a few at full speed
+    udp.close()
+
+
+def test_bad_parameters_stop_the_node_with_a_clear_error(hopper_cli):
+    node = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=none", "-p", "udp_host:=192.0.2.1")
+    assert node.wait() == 1
+    assert "only sends on loopback" in node.stderr
+    node = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=none", "-p", "enable_effects:=[levitation]")
+    assert node.wait() == 1
+    assert "unknown effect 'levitation'" in node.stderr
+
+
+def test_canopen_master_in_another_process_drives_the_simulated_epos2(hopper_cli):
+    """Issue 4's acceptance: sim_robot in its process, the `canopen` library as master in this one."""
+    import canopen
+    from canopen.sdo.exceptions import SdoAbortedError
+
+    from hopper_ros.hardware.encoders import CounterUnwrapper
+
+    hub_port = free_port()
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    udp.bind(("127.0.0.1", 0))
+    node = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=hub", "-p", f"can_port:={hub_port}",
+                      "-p", f"udp_port:={udp.getsockname()[1]}")
+    node.wait_for_line(rf"CAN hub on 127.0.0.1:{hub_port}")
+    network = canopen.Network()
+    network.connect(interface="socketcand", host="127.0.0.1", port=hub_port, channel="can0")
+    try:
+        drive = canopen.RemoteNode(1, str(REPO / "test" / "data" / "epos2.eds"))
+        network.add_node(drive)
+        drive.nmt.wait_for_heartbeat(SAFETY_TIMEOUT)
+        drive.nmt.state = "OPERATIONAL"
+        assert drive.nmt.wait_for_heartbeat(SAFETY_TIMEOUT) == "OPERATIONAL"
+        assert drive.sdo[0x1000].raw == 0x00020192                   # device type: CiA 402 servo drive
+        with pytest.raises(SdoAbortedError) as abort:
+            drive.sdo.upload(0x2345, 0)
+        assert abort.value.code == 0x06020000                        # object does not exist
+        network.send_message(0x200 + 1, b"\x0f")                     # RPDO1 one byte short: malformed
+
+        drive.sdo["Controlword"].raw = 0x00
+        drive.sdo["Controlword"].raw = 0x80                          # clear the PDO length fault
+        drive.sdo["Modes of operation"].raw = -3                     # current mode
+        for command, state in ((0x06, 0x21), (0x07, 0x23), (0x0F, 0x27)):  # CiA 402 states
+            drive.sdo["Controlword"].raw = command
+            assert drive.sdo["Statusword"].raw & 0x6F == state
+        drive.rpdo.read()
+        unwrap = CounterUnwrapper()
+        before = unwrap.update(latest_packets(udp, 1)[0].motor_counts)
+        drive.rpdo[1]["Controlword"].raw = 0x0F
+        drive.rpdo[1]["Current mode setting value"].raw = 1000       # [mA]
+        drive.rpdo[1].transmit()
+        time.sleep(0.3)
+        packets = latest_packets(udp, 5)
+        moved = unwrap.update(packets[-1].motor_counts) - before
+        assert moved > 500                                           # the motor turned (1 A for 0.3 s)
+        assert packets[-1].motor_current_ma == pytest.approx(1000, abs=5)
+
+        # a fault: the master's heartbeat, which the drive consumes, stops
+        drive.sdo[0x1016][1].raw = (0x7F << 16) | 50                 # consume node 0x7F, 50 ms
+        heartbeat = network.send_periodic(0x700 + 0x7F, [0x05], 0.01)
+        time.sleep(0.2)
+        heartbeat.stop()
+        end = time.monotonic() + SAFETY_TIMEOUT
+        while not any(e.code == 0x8130 for e in drive.emcy.log) and time.monotonic() < end:
+            time.sleep(0.01)
+        assert [e.code for e in drive.emcy.log if e.code] == [0x8210, 0x8130]
+        assert drive.sdo["Statusword"].raw & 0x4F == 0x08            # FAULT
+        time.sleep(0.05)
+        idle = latest_packets(udp, 5)
+        assert idle[-1].motor_current_ma == 0                         # a fault disables the motor
+        drive.sdo[0x1016][1].raw = 0
+        drive.sdo["Controlword"].raw = 0x80                          # fault reset
+        assert drive.sdo["Statusword"].raw & 0x4F == 0x40            # switch on disabled
+    finally:
+        network.disconnect()
+        node.signal(signal.SIGINT)
+        assert node.wait() == 0
+        udp.close()
