@@ -8,5 +8,6 @@ CMake build reads it for the `ros2 run` wrappers. It must stay importable withou
 NODES = {
     "setpoint_scheduler": "hopper_ros.nodes.setpoint_scheduler:main",
     "stride_predictor": "hopper_ros.nodes.stride_predictor:main",
+    "motor_driver": "hopper_ros.nodes.motor_driver:main",
     "sim_robot": "hopper_ros.nodes.sim_robot:main",
 }

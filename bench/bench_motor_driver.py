@@ -1,0 +1,192 @@
+"""Motor driver latency and watchdog, three processes on loopback.
+
+This process: the socketcand hub (loopback), the emulated EPOS2 served by a thread, and a bus
+spy. A frame is "on the bus" when the hub puts it on its in-process python-can bus (the drive's
+bus); the virtual bus stamps it then with CLOCK_REALTIME, so the spy thread's own scheduling does
+not count. Child 1: the motor_driver node (`hopper run motor_driver`, socketcand client, own
+namespace). Child 2: a publisher of MotorCommand at 1 kHz (current mode), taking CLOCK_REALTIME
+just before each publish(); every command's torque maps to a distinct current setting, so the
+RPDO of each command is known.
+
+Figures: motor_cmd_to_frame_p50_us / _p99_us / _max_us (publish -> the RPDO carrying that
+command on the bus), motor_cmd_superseded (commands whose RPDO never showed), and
+watchdog_stop_ms (the last command published -> the first RPDO that stops the drive, with the
+default command_timeout of config/motor_driver.yaml: quick stop, then disable voltage),
+motor_cmd_publish_rate_hz. A command counts as superseded when a newer one reached the driver
+first (the driver keeps only the latest: stale setpoints are not sent).
+"""
+import json
+import math
+import os
+import struct
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+COUNT = 3000            # measured commands
+QUICK_COUNT = 800
+WARMUP = 500            # sent first, not measured (discovery, enabling the drive)
+RATE_HZ = 1000.0
+MATCH_TIMEOUT_S = 30.0
+BASE_MA = 1000          # command k asks for BASE_MA + k % SPAN_MA milliamps
+SPAN_MA = 8000
+
+
+def _env():
+    env = dict(os.environ)
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    return env
+
+
+def _percentile(sorted_values, fraction):
+    if not sorted_values:
+        return float("nan")
+    rank = min(max(1, math.ceil(fraction * len(sorted_values))), len(sorted_values))
+    return sorted_values[rank - 1]
+
+
+def _torque_for(sequence, hardware):
+    milliamps = BASE_MA + sequence % SPAN_MA
+    return milliamps / 1000.0 * hardware["motor"]["torque_constant"] * hardware["motor"]["gear_ratio"]
+
+
+def run(quick=False):
+    from hopper_ros.canbus.epos2_emulator import Epos2Emulator
+    from hopper_ros.canbus.epos2_objects import Command, rpdo_cob_id
+    from hopper_ros.canbus.socketcand_server import SocketcandServer
+    from hopper_ros.motor_driver import load_hardware
+
+    hardware = load_hardware()
+    node_id = hardware["drive"]["node_id"]
+    count = QUICK_COUNT if quick else COUNT
+    total = WARMUP + count
+    namespace = f"/hopper_bench_motor_{os.getpid()}"
+    rpdo1 = rpdo_cob_id(1, node_id)
+    frames = []                                      # (realtime ns on the bus, controlword, mA) of every RPDO1
+    stop = threading.Event()
+
+    hub = SocketcandServer("127.0.0.1", 0, "can0").start()
+    drive_bus, spy_bus = hub.local_bus(), hub.local_bus()
+    drive = Epos2Emulator(drive_bus, hardware)
+
+    def serve_drive():
+        while not stop.is_set():
+            now = time.monotonic()
+            drive.poll(now)
+            drive.control(now, 0, 0.0, drive.demand)
+            time.sleep(0.0005)
+
+    def spy():
+        while not stop.is_set():
+            frame = spy_bus.recv(timeout=0.05)
+            if frame is not None and frame.arbitration_id == rpdo1 and len(frame.data) == 5:
+                controlword, _, milliamps = struct.unpack("<Hbh", frame.data)
+                frames.append((round(frame.timestamp * 1e9), controlword, milliamps))
+
+    threads = [threading.Thread(target=serve_drive, daemon=True), threading.Thread(target=spy, daemon=True)]
+    for thread in threads:
+        thread.start()
+    node = subprocess.Popen(
+        [sys.executable, "-m", "hopper_ros.cli", "run", "motor_driver", "--ros-args",
+         "-r", f"__ns:={namespace}", "-p", "interface:=socketcand", "-p", "host:=127.0.0.1",
+         "-p", f"port:={hub.port}"],
+        cwd=REPO, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        publisher = subprocess.run(
+            [sys.executable, os.path.abspath(__file__), "publish", f"{namespace}/motor_command", str(total),
+             str(RATE_HZ)],
+            stdout=subprocess.PIPE, text=True, env=_env(), cwd=REPO,
+            timeout=MATCH_TIMEOUT_S + total / RATE_HZ + 30.0, check=True)
+        time.sleep(0.3)                               # the watchdog acts 20 ms after the last command
+    finally:
+        node.terminate()
+        try:
+            _, node_log = node.communicate(timeout=30.0)
+        except subprocess.TimeoutExpired:
+            node.kill()
+            _, node_log = node.communicate()
+        stop.set()
+        for thread in threads:
+            thread.join(5.0)
+        hub.close()
+    sent = json.loads(publisher.stdout.strip().splitlines()[-1])
+    stamps = sent["stamps_ns"]
+
+    latencies_us, lost = [], 0
+    index = 0
+    for sequence in range(WARMUP, total):
+        milliamps = BASE_MA + sequence % SPAN_MA
+        while index < len(frames) and frames[index][0] < stamps[sequence]:
+            index += 1
+        match = next((f for f in frames[index:index + 200] if f[2] == milliamps), None)
+        if match is None:
+            lost += 1
+            continue
+        latencies_us.append((match[0] - stamps[sequence]) / 1000.0)
+    latencies_us.sort()
+    last = stamps[-1]
+    stop_frame = next((f for f in frames if f[0] > last and f[1] == Command.QUICK_STOP), None)
+    if not latencies_us or stop_frame is None:
+        raise RuntimeError(f"no command reached the bus or no stop frame; node log:\n{node_log[-3000:]}")
+    return [
+        {"name": "motor_cmd_to_frame_p50_us", "value": round(_percentile(latencies_us, 0.50), 1), "unit": "us"},
+        {"name": "motor_cmd_to_frame_p99_us", "value": round(_percentile(latencies_us, 0.99), 1), "unit": "us"},
+        {"name": "motor_cmd_to_frame_max_us", "value": round(latencies_us[-1], 1), "unit": "us"},
+        {"name": "motor_cmd_superseded", "value": lost, "unit": "msgs"},
+        {"name": "motor_cmd_publish_rate_hz", "value": round(sent["rate_hz"], 1), "unit": "Hz"},
+        {"name": "watchdog_stop_ms", "value": round((stop_frame[0] - last) / 1e6, 2), "unit": "ms"},
+    ]
+
+
+# ---------------------------------------------------------------------------- publisher process
+
+def _publish(topic, total, rate_hz):
+    import rclpy
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from hopper_ros.motor_driver import load_hardware
+    from hopper_ros.msg import MotorCommand
+
+    hardware = load_hardware()
+    rclpy.init()
+    node = rclpy.create_node("hopper_bench_motor_command")
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+    publisher = node.create_publisher(MotorCommand, topic, qos)
+    deadline = time.monotonic() + MATCH_TIMEOUT_S
+    while publisher.get_subscription_count() < 1:
+        if time.monotonic() > deadline:
+            raise SystemExit("publisher: the motor driver did not subscribe")
+        time.sleep(0.01)
+    time.sleep(1.0)                                   # the driver configures the drive meanwhile
+    msg = MotorCommand(mode=MotorCommand.MODE_CURRENT)
+    stamps = []
+    period_ns = int(1e9 / rate_hz)
+    start = time.monotonic_ns()
+    for sequence in range(total):
+        target = start + sequence * period_ns
+        delay = target - time.monotonic_ns()
+        if delay > 0:
+            time.sleep(delay / 1e9)
+        msg.setpoint = _torque_for(sequence, hardware)
+        msg.header.stamp = node.get_clock().now().to_msg()
+        now = time.time_ns()
+        publisher.publish(msg)
+        stamps.append(now)
+    elapsed = (time.monotonic_ns() - start) / 1e9
+    print(json.dumps({"rate_hz": (total - 1) / elapsed if elapsed else 0.0, "stamps_ns": stamps}), flush=True)
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if sys.argv[1] == "publish":
+        _publish(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
+    else:
+        raise SystemExit(f"unknown role {sys.argv[1]}")

@@ -1,0 +1,477 @@
+"""The motor driver (hopper_ros.motor_driver) against the emulated EPOS2 on a python-can `virtual`
+bus, with the independent `canopen` library on the same bus reading the drive's configuration
+back by SDO and decoding every PDO, EMCY and heartbeat.
+
+The rig runs in simulated time, 1 ms per step: the drive's cycle, the driver's cycle, then frames
+are exchanged until the bus is quiet; canopen gets every frame synchronously (Network.notify), so
+what it decoded can be tied to the step it happened in.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import threading
+import time
+
+import can
+import canopen
+import pytest
+
+from hopper_ros.canbus import epos2_objects as eo
+from hopper_ros.canbus.epos2_emulator import Epos2Emulator
+from hopper_ros.canbus.epos2_objects import Command, NmtState, State
+from hopper_ros.motor_driver import (
+    ERROR,
+    MODE_CURRENT,
+    MODE_DISABLED,
+    MODE_POSITION,
+    WARN,
+    DriverSettings,
+    MotorDriver,
+    Phase,
+    load_hardware,
+    load_section,
+    open_bus,
+)
+from test_motor_driver_master import canopen_dictionary
+
+HW = load_hardware()
+NODE = HW["drive"]["node_id"]
+K_T, GEAR = HW["motor"]["torque_constant"], HW["motor"]["gear_ratio"]
+COUNTS_PER_LEG_TURN = 500 * 4 * 26
+SETTINGS = DriverSettings()             # the defaults: 1 ms SYNC, 20 ms command timeout
+_channels = itertools.count()
+
+
+class ManualClock:
+    def __init__(self, t: float = 1000.0):
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
+
+
+class Rig:
+    """Driver + emulated EPOS2 + canopen observer on one virtual channel, stepped in simulated time."""
+
+    def __init__(self, settings: DriverSettings = SETTINGS, before_start=None):
+        channel = f"motor_driver_test_{next(_channels)}"
+        self.clock = ManualClock()
+        self.driver_bus = can.Bus(interface="virtual", channel=channel)
+        self.drive_bus = can.Bus(interface="virtual", channel=channel)
+        self.spy_bus = can.Bus(interface="virtual", channel=channel)
+        self.drive = Epos2Emulator(self.drive_bus, HW)
+        if before_start:
+            before_start(self)
+        self.driver = MotorDriver(self.driver_bus, HW, settings, clock=self.clock)
+        self.network = canopen.Network(self.spy_bus)        # no notifier: the rig feeds it
+        self.remote = canopen.RemoteNode(NODE, canopen_dictionary(NODE))
+        self.network.add_node(self.remote)
+        self.counts, self.rpm = 0, 0.0
+        self.drive_alive = self.driver_alive = True
+        self.frames: list[tuple[float, int, bytes]] = []    # every frame on the bus: (time, COB-ID, data)
+        self._stamp: float | None = None                    # time of a frame replayed to canopen
+        self.rpdos: list[tuple[float, int, tuple]] = []     # (time, RPDO number, values decoded by canopen)
+        self.states: list[State] = []                       # the drive's state after each step
+        self.step_count = 0
+
+    def close(self) -> None:
+        for bus in (self.driver_bus, self.drive_bus, self.spy_bus):
+            bus.shutdown()
+
+    # -------------------------------------------------------------- stepping
+    def step(self, n: int = 1, command: tuple[int, float] | None = None) -> None:
+        for _ in range(n):
+            self.clock.t += 0.001
+            self.step_count += 1
+            if command is not None and self.driver_alive:
+                self.driver.command(*command)
+            if self.drive_alive:
+                self.drive.poll(self.clock.t)
+                self.drive.control(self.clock.t, self.counts, self.rpm, self.drive.demand)
+            if self.driver_alive:
+                self.driver.cycle()
+            self._settle()
+            self.states.append(self.drive.state)
+
+    def _settle(self) -> None:
+        for _ in range(100):
+            if self.drive_alive:
+                self.drive.poll(self.clock.t)
+            moved = False
+            while True:
+                try:
+                    frame = self.driver_bus.recv(timeout=0)
+                except can.CanError as exc:
+                    self.driver.bus_error(str(exc))
+                    break
+                if frame is None:
+                    break
+                moved = True
+                if self.driver_alive:
+                    self.driver.handle(frame)
+            if not moved:
+                break
+        while (frame := self.spy_bus.recv(timeout=0)) is not None:
+            self.frames.append((self.clock.t, frame.arbitration_id, bytes(frame.data)))
+            try:
+                self.network.notify(frame.arbitration_id, frame.data, self.clock.t)
+            except Exception:  # noqa: BLE001 - canopen may choke on the malformed frames of a test
+                pass
+
+    def until(self, condition, limit: int = 2000, command=None) -> int:
+        """Step until condition() holds; the number of steps taken."""
+        for taken in range(limit):
+            if condition():
+                return taken
+            self.step(command=command)
+        raise AssertionError(f"condition not reached in {limit} steps; driver {self.driver.phase}, "
+                             f"drive {self.drive.state}, events {self.driver.drain_events()[-5:]}")
+
+    # -------------------------------------------------------------- canopen observer
+    def read_pdo_configuration(self) -> None:
+        """canopen reads the PDO configuration from the drive by SDO (in a thread; we keep stepping)."""
+        errors = []
+
+        def read():
+            try:
+                self.remote.rpdo.read()
+                self.remote.tpdo.read()
+            except Exception as exc:  # noqa: BLE001
+                errors.append(exc)
+
+        reader = threading.Thread(target=read)
+        reader.start()
+        end = time.monotonic() + 20.0
+        while reader.is_alive():
+            self.step()
+            time.sleep(0.0002)
+            assert time.monotonic() < end, "canopen did not finish reading the PDO configuration"
+        assert not errors, errors
+        for number in (1, 2):
+            pdo_map = self.remote.rpdo[number]
+            pdo_map.add_callback(lambda pdo, number=number: self.rpdos.append(
+                (self._stamp if self._stamp is not None else self.clock.t, number, tuple(v.raw for v in pdo))))
+            for self._stamp, cob, data in self.frames:                 # what went out before canopen knew
+                if cob == pdo_map.cob_id:
+                    pdo_map.on_message(cob, data, self._stamp)
+            self._stamp = None
+        self.rpdos.sort(key=lambda row: row[0])
+
+    def controlwords(self, since: float = -math.inf) -> list[int]:
+        return [values[0] for t, _, values in self.rpdos if t > since]
+
+    def start(self) -> "Rig":
+        self.until(lambda: self.driver.phase is Phase.RUNNING, limit=50)
+        self.read_pdo_configuration()
+        return self
+
+    def enable(self, torque: float = 0.5) -> None:
+        self.until(lambda: self.drive.state is State.OPERATION_ENABLED, limit=300, command=(MODE_CURRENT, torque))
+
+
+def dedup(values):
+    return [v for i, v in enumerate(values) if i == 0 or v != values[i - 1]]
+
+
+@pytest.fixture
+def rig():
+    rigs = []
+
+    def make(**kwargs) -> Rig:
+        rigs.append(Rig(**kwargs))
+        return rigs[-1]
+
+    yield make
+    for r in rigs:
+        r.close()
+
+
+def _milliamps(torque: float) -> int:
+    return round(torque / (K_T * GEAR) * 1000.0)
+
+
+# ------------------------------------------------------------------------------------------------
+
+
+def test_startup_configures_the_drive_as_canopen_reads_it_back(rig):
+    r = rig()
+    steps = r.until(lambda: r.driver.phase is Phase.RUNNING, limit=50)
+    assert steps <= 3                                                   # one SDO after the other, no waiting
+    drive = r.drive
+    assert drive.nmt_state == NmtState.OPERATIONAL
+    assert drive.value(eo.PRODUCER_HEARTBEAT_TIME) == 100
+    assert drive.value(eo.CONSUMER_HEARTBEAT_TIME, 1) == (127 << 16) | 200
+    assert drive.value(eo.MOTOR_DATA, 1) == 10000 and drive.value(eo.MOTOR_DATA, 2) == 20000
+    assert [drive.value(eo.POSITION_CONTROL_PARAMETERS, s) for s in (1, 2, 3)] == [537, 2179, 705]
+    assert drive.value(eo.MODES_OF_OPERATION) == -3
+    r.read_pdo_configuration()
+    rpdo, tpdo = r.remote.rpdo, r.remote.tpdo
+    layout = lambda pdo: [(v.index, v.subindex, v.length) for v in pdo]  # noqa: E731
+    assert rpdo[1].enabled and rpdo[1].cob_id == 0x200 + NODE and rpdo[1].trans_type == 255
+    assert layout(rpdo[1]) == [(0x6040, 0, 16), (0x6060, 0, 8), (0x2030, 0, 16)]
+    assert rpdo[2].enabled and rpdo[2].cob_id == 0x300 + NODE and rpdo[2].trans_type == 255
+    assert layout(rpdo[2]) == [(0x6040, 0, 16), (0x6060, 0, 8), (0x2062, 0, 32)]
+    assert tpdo[1].enabled and tpdo[1].cob_id == 0x180 + NODE and tpdo[1].trans_type == 1
+    assert layout(tpdo[1]) == [(0x6041, 0, 16), (0x6064, 0, 32), (0x6078, 0, 16)]
+    assert tpdo[2].enabled and tpdo[2].cob_id == 0x280 + NODE and tpdo[2].trans_type == 1
+    assert layout(tpdo[2]) == [(0x606C, 0, 32), (0x6061, 0, 8), (0x603F, 0, 16)]
+    assert not any(p.enabled for p in (rpdo[3], rpdo[4], tpdo[3], tpdo[4]))
+    r.step(150)                                                         # a drive heartbeat (100 ms) passes
+    assert r.remote.nmt.state == "OPERATIONAL" and r.driver.status.heartbeat_ok
+    assert r.driver.counters["sync_sent"] >= 150 and r.driver.counters["tpdo_missed"] == 0
+    assert r.driver.counters["malformed_frames"] == 0 and r.driver.counters["sdo_aborts"] == 0
+    assert r.drive.state is State.SWITCH_ON_DISABLED                    # no command yet: power stage off
+    assert set(r.controlwords()) == {Command.DISABLE_VOLTAGE}
+
+
+def test_state_machine_resets_a_startup_fault_then_enables_on_command(rig):
+    r = rig(before_start=lambda rig: rig.drive.inject_fault(eo.ERROR_OVER_CURRENT, rig.clock.t))
+    assert r.drive.state is State.FAULT
+    r.start()
+    r.until(lambda: r.drive.state is State.SWITCH_ON_DISABLED, limit=50)
+    status = r.driver.status
+    assert (status.fault_code, status.fault_text) == (0x2310, "Over current error")   # read at start-up (0x603F)
+    assert r.driver.counters["fault_resets"] == 1
+    r.step(150)                                                         # stays off without a command
+    assert r.drive.state is State.SWITCH_ON_DISABLED
+    r.enable()
+    r.step(5, command=(MODE_CURRENT, 0.5))
+    assert dedup(r.controlwords()) == [Command.DISABLE_VOLTAGE, Command.FAULT_RESET, Command.DISABLE_VOLTAGE,
+                                       Command.SHUTDOWN, Command.SWITCH_ON_AND_ENABLE]
+    assert dedup(r.states) == [State.FAULT, State.SWITCH_ON_DISABLED, State.READY_TO_SWITCH_ON,
+                               State.OPERATION_ENABLED]
+    assert r.driver.status.state is State.OPERATION_ENABLED and r.driver.status.commanded_mode == MODE_CURRENT
+    assert r.driver.health() == (0, "")
+
+
+def test_pdo_contents_and_scaling_with_the_current_limit(rig):
+    r = rig().start()
+    r.enable(torque=1.0)
+    r.step(3, command=(MODE_CURRENT, 1.0))
+    t, number, (controlword, mode, milliamps) = r.rpdos[-1]
+    assert (number, controlword, mode, milliamps) == (1, 0x000F, -3, _milliamps(1.0)) and milliamps == 1595
+    assert r.drive.demand == pytest.approx(1.595)
+    r.step(2, command=(MODE_CURRENT, -30.0))                             # beyond 20 A x k_t x 26 = 12.5 N m
+    assert r.rpdos[-1][2] == (0x000F, -3, -20000) and r.drive.demand == pytest.approx(-20.0)
+    assert r.driver.counters["current_clamped"] == 2
+    r.step(2, command=(MODE_CURRENT, 12.0))
+    assert r.rpdos[-1][2] == (0x000F, -3, _milliamps(12.0))
+
+    r.step(3, command=(MODE_POSITION, 0.1))
+    assert r.rpdos[-1][1:] == (2, (0x000F, -1, round(0.1 * COUNTS_PER_LEG_TURN / (2 * math.pi))))
+    assert r.rpdos[-1][2][2] == 828 and r.drive.operation_mode == -1
+    assert r.drive.value(eo.POSITION_MODE_SETTING_VALUE) == 828
+
+    # feedback: canopen's decoding of the TPDOs and the driver's SI values agree
+    r.counts, r.rpm = COUNTS_PER_LEG_TURN // 4, 1000.0
+    r.step(3, command=(MODE_POSITION, 0.1))
+    tpdo1, tpdo2 = r.remote.tpdo[1], r.remote.tpdo[2]
+    status = r.driver.status
+    assert tpdo1[1].raw == COUNTS_PER_LEG_TURN // 4 and status.position == pytest.approx(math.pi / 2, rel=1e-12)
+    assert tpdo2[0].raw == 1000 and status.velocity == pytest.approx(1000 * 2 * math.pi / 60 / GEAR, rel=1e-12)
+    assert tpdo2[1].raw == -1 and status.operation_mode == -1 and status.commanded_mode == MODE_POSITION
+    assert tpdo1[2].raw == round(r.drive.demand * 1000)
+    assert status.current == pytest.approx(tpdo1[2].raw / 1000.0)
+    assert status.torque == pytest.approx(status.current * K_T * GEAR)
+    assert tpdo1[0].raw == status.statusword == eo.STATUSWORD_OF_STATE[State.OPERATION_ENABLED]
+
+
+def test_command_watchdog_quick_stops_then_disables_and_recovers(rig):
+    r = rig().start()
+    r.enable()
+    r.step(20, command=(MODE_CURRENT, 2.0))
+    last_command = r.clock.t
+    r.step(60)
+    after = [(t, values[0]) for t, _, values in r.rpdos if t > last_command]
+    stop_time, first = next((t, cw) for t, cw in after if cw != Command.SWITCH_ON_AND_ENABLE)
+    assert first == Command.QUICK_STOP
+    assert 0.020 < stop_time - last_command <= 0.022                    # timeout + at most one SYNC period
+    assert dedup([cw for _, cw in after]) == [Command.SWITCH_ON_AND_ENABLE, Command.QUICK_STOP,
+                                              Command.DISABLE_VOLTAGE]
+    assert all(values[2] == 0 for t, _, values in r.rpdos if t >= stop_time)   # no current after the stop
+    assert dedup(r.states)[-3:] == [State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.SWITCH_ON_DISABLED]
+    assert r.drive.demand == 0.0
+    assert r.driver.counters["watchdog_stops"] == 1 and r.driver.health()[0] == WARN
+
+    # commands that are not valid do not feed the watchdog
+    r.enable()
+    r.step(40, command=(MODE_CURRENT, math.nan))
+    assert r.drive.state is State.SWITCH_ON_DISABLED and r.driver.counters["commands_rejected"] == 40
+    r.step(5, command=(7, 1.0))
+    assert r.driver.counters["commands_rejected"] == 45
+    steps = r.until(lambda: r.drive.state is State.OPERATION_ENABLED, command=(MODE_CURRENT, 2.0))
+    assert steps <= 4 and r.driver.counters["watchdog_stops"] == 2
+
+
+def test_fault_in_operation_is_reported_and_reset_only_after_disable(rig):
+    r = rig().start()
+    r.enable()
+    r.drive.inject_fault(eo.ERROR_FOLLOWING, r.clock.t)
+    r.step(2, command=(MODE_CURRENT, 0.5))
+    status = r.driver.status
+    assert status.state is State.FAULT and (status.fault_code, status.fault_text) == (0x8611, "Following error")
+    assert r.remote.emcy.active[-1].code == 0x8611                      # canopen decoded the same EMCY
+    assert r.driver.health() == (ERROR, "drive fault 0x8611: Following error")
+    assert r.driver.counters["faults"] == 1 and r.driver.counters["emcy_received"] == 1
+    fault_at = r.clock.t
+    r.step(100, command=(MODE_CURRENT, 0.5))                            # the stream goes on: no reset by itself
+    assert r.drive.state is State.FAULT
+    assert not any(cw & Command.FAULT_RESET for cw in r.controlwords(since=fault_at))
+    r.step(3, command=(MODE_DISABLED, 0.0))                            # acknowledgement
+    assert r.drive.state is State.SWITCH_ON_DISABLED and r.driver.counters["fault_resets"] == 1
+    assert r.remote.emcy.active == []                                   # the drive's "error reset" EMCY
+    assert r.driver.status.fault_code == 0x8611                         # the last fault stays readable
+    r.enable()
+    assert r.driver.health() == (0, "")
+
+
+def test_heartbeat_loss_disables_and_the_drive_comes_back(rig):
+    r = rig().start()
+    r.enable()
+    r.step(150, command=(MODE_CURRENT, 0.5))
+    r.drive_alive = False                                               # the drive goes silent
+    lost_at = r.clock.t
+    r.until(lambda: r.driver.counters["heartbeat_losses"] == 1, command=(MODE_CURRENT, 0.5))
+    assert r.clock.t - lost_at <= 0.3 + 0.1 + 0.002                     # timeout after the last heartbeat
+    assert not r.driver.status.heartbeat_ok
+    assert r.driver.health() == (ERROR, "drive heartbeat lost: drive disabled")
+    r.step(2, command=(MODE_CURRENT, 0.5))
+    assert r.rpdos[-1][2][0] == Command.DISABLE_VOLTAGE                  # told to switch off, in case it hears
+    r.drive_alive = True
+    r.until(lambda: r.driver.status.heartbeat_ok and r.drive.state is State.OPERATION_ENABLED, limit=300,
+            command=(MODE_CURRENT, 0.5))
+
+
+def test_drive_reboot_is_configured_again(rig):
+    r = rig().start()
+    r.enable()
+    r.network.send_message(0, [eo.NmtCommand.RESET_NODE, NODE])         # someone resets the drive
+    r.step()
+    assert r.driver.counters["drive_bootups"] == 2                      # power-on one and this one
+    r.until(lambda: r.driver.phase is Phase.RUNNING, limit=20, command=(MODE_CURRENT, 0.5))
+    assert r.drive.value(eo.TPDO_MAPPING, 3) == eo.pdo_mapping_entry(eo.CURRENT_ACTUAL_VALUE, 0, 16)
+    r.until(lambda: r.drive.state is State.OPERATION_ENABLED, limit=300, command=(MODE_CURRENT, 0.5))
+
+
+def test_silent_master_or_broken_bus_leaves_the_drive_safe(rig):
+    r = rig().start()
+    r.enable()
+    r.step(10, command=(MODE_CURRENT, 3.0))
+    assert r.drive.demand > 1.0
+    r.driver_bus.shutdown()                                             # our transport breaks
+    r.step(5, command=(MODE_CURRENT, 3.0))                              # the driver carries on, counting
+    assert r.driver.counters["bus_errors"] >= 5
+    assert r.driver.health() == (ERROR, "CAN bus error: drive disabled")
+    r.step(250)                                                         # the drive misses our heartbeat
+    assert r.drive.state is State.FAULT and r.drive.error_code == eo.ERROR_LIFE_GUARD and r.drive.demand == 0.0
+
+
+def test_error_frame_disables_for_the_holdoff(rig):
+    r = rig().start()
+    r.enable()
+    r.spy_bus.send(can.Message(is_error_frame=True, arbitration_id=0x20000004, data=bytes(8)))
+    error_at = r.clock.t
+    r.step(5, command=(MODE_CURRENT, 0.5))
+    assert r.drive.state is State.SWITCH_ON_DISABLED and r.driver.counters["bus_errors"] == 1
+    r.until(lambda: r.drive.state is State.OPERATION_ENABLED, command=(MODE_CURRENT, 0.5))
+    assert r.clock.t - error_at >= 0.1                                  # bus_error_holdoff
+
+
+def test_malformed_frames_are_counted_and_never_fatal(rig):
+    r = rig().start()
+    r.enable()
+    bad = [(0x180 + NODE, b"\x37\x01\x00"), (0x280 + NODE, b"\x00"), (0x80 + NODE, b"\x10\x23\x02"),
+           (0x700 + NODE, b""), (0x700 + NODE, b"\x33"), (0x580 + NODE, b"\x60\x40\x60"),
+           (0x580 + NODE, bytes([0x4B, 0x41, 0x60, 0, 0x37, 0x01, 0, 0]))]   # well-formed, but nobody asked
+    for cob, data in bad:
+        r.spy_bus.send(can.Message(arbitration_id=cob, data=data, is_extended_id=False))
+    r.step(3, command=(MODE_CURRENT, 0.5))
+    assert r.driver.counters["malformed_frames"] == 6
+    level, _ = r.driver.health()
+    assert level == 0 and r.drive.state is State.OPERATION_ENABLED      # operation goes on
+    assert any("malformed frame" in text for _, text in r.driver.drain_events())
+    received = r.driver.counters["tpdo_received"]
+    r.step(10, command=(MODE_CURRENT, 0.5))
+    assert r.driver.counters["tpdo_received"] == received + 20
+
+
+def test_shutdown_leaves_the_drive_disabled(rig):
+    r = rig().start()
+    r.enable()
+    r.step(10, command=(MODE_CURRENT, 2.0))
+    r.driver.begin_shutdown()
+    r.until(lambda: r.driver.phase is Phase.STOPPED, limit=100)
+    assert r.driver.shutdown_confirmed
+    assert r.drive.state is State.SWITCH_ON_DISABLED and r.drive.demand == 0.0
+    assert r.drive.nmt_state == NmtState.PRE_OPERATIONAL and r.drive.value(eo.CONSUMER_HEARTBEAT_TIME, 1) == 0
+    assert r.controlwords()[-1] == Command.DISABLE_VOLTAGE
+    r.driver_alive = False
+    r.step(500)                                                         # no heartbeat fault afterwards
+    assert r.drive.state is State.SWITCH_ON_DISABLED
+
+
+def test_blocking_shutdown_pumps_the_bus_itself():
+    """shutdown() as the node calls it: real time, the drive served by a thread of its own."""
+    channel = f"motor_driver_test_{next(_channels)}"
+    driver_bus = can.Bus(interface="virtual", channel=channel)
+    drive_bus = can.Bus(interface="virtual", channel=channel)
+    drive = Epos2Emulator(drive_bus, HW)
+    stop = threading.Event()
+
+    def serve():
+        while not stop.is_set():
+            now = time.monotonic()
+            drive.poll(now)
+            drive.control(now, 0, 0.0, drive.demand)
+            time.sleep(0.0005)
+
+    server = threading.Thread(target=serve)
+    server.start()
+    try:
+        driver = MotorDriver(driver_bus, HW, SETTINGS)
+        end = time.monotonic() + 10.0
+        while drive.state is not State.OPERATION_ENABLED:
+            driver.command(MODE_CURRENT, 1.0)
+            driver.cycle()
+            while (frame := driver_bus.recv(timeout=0.001)) is not None:
+                driver.handle(frame)
+            assert time.monotonic() < end
+        started = time.monotonic()
+        assert driver.shutdown() is True
+        assert time.monotonic() - started < SETTINGS.shutdown_timeout
+        assert drive.state is State.SWITCH_ON_DISABLED
+        end = time.monotonic() + 2.0
+        while drive.nmt_state != NmtState.PRE_OPERATIONAL:                # the last frame, just sent
+            assert time.monotonic() < end
+            time.sleep(0.001)
+    finally:
+        stop.set()
+        server.join()
+        driver_bus.shutdown()
+        drive_bus.shutdown()
+
+
+def test_configuration_and_bus_choice():
+    section = load_section()
+    settings = DriverSettings.from_mapping(section)
+    assert settings.command_timeout == 0.02 and settings.sync_period == 0.001
+    assert DriverSettings.from_mapping(section, command_timeout=0.005).command_timeout == 0.005
+    with pytest.raises(ValueError, match="unknown setting"):
+        DriverSettings.from_mapping({"comand_timeout": 0.02})
+    with pytest.raises(ValueError, match="command_timeout"):
+        DriverSettings(command_timeout=-1.0)
+    with pytest.raises(ValueError, match="master_node_id"):
+        MotorDriver(None, HW, DriverSettings(master_node_id=NODE))
+    with pytest.raises(ValueError, match="udp_multicast"):
+        open_bus({"interface": "udp_multicast", "channel": "239.74.163.2"})
+    bus = open_bus(HW["can"], interface="virtual", channel="motor_driver_config_test")
+    try:
+        assert isinstance(bus, can.interfaces.virtual.VirtualBus)
+    finally:
+        bus.shutdown()
+    driver = MotorDriver(None, HW, SETTINGS)
+    assert driver.current_for_torque(1.0) == (pytest.approx(1.0 / (K_T * GEAR)), False)
+    assert driver.current_for_torque(-100.0) == (-20.0, True)
+    assert driver.counts_for_angle(2 * math.pi) == COUNTS_PER_LEG_TURN

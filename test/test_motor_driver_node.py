@@ -1,0 +1,178 @@
+"""motor_driver node in its own process on real topics, reaching the emulated EPOS2 of this test
+process through the loopback socketcand hub (python-can's socketcand client in the node)."""
+
+from __future__ import annotations
+
+import math
+import queue
+import signal
+import threading
+import time
+
+import pytest
+
+from conftest import SAFETY_TIMEOUT, spin_until
+from hopper_ros.canbus import epos2_objects as eo
+from hopper_ros.canbus.epos2_emulator import Epos2Emulator
+from hopper_ros.canbus.epos2_objects import Command, NmtState, State
+from hopper_ros.canbus.socketcand_server import SocketcandServer
+from hopper_ros.motor_driver import load_hardware
+
+HW = load_hardware()
+K_T, GEAR = HW["motor"]["torque_constant"], HW["motor"]["gear_ratio"]
+
+
+class DriveThread:
+    """The emulated EPOS2 on the hub's in-process side, served every 0.5 ms by a thread."""
+
+    def __init__(self, hub: SocketcandServer):
+        self.bus = hub.local_bus()
+        self.drive = Epos2Emulator(self.bus, HW)
+        self.actions: queue.Queue = queue.Queue()       # run in the drive's thread (it is single-threaded)
+        self.controlwords: list[int] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        drive = self.drive
+        while not self._stop.is_set():
+            now = time.monotonic()
+            while not self.actions.empty():
+                self.actions.get()(now)
+            drive.poll(now)
+            drive.control(now, 0, 0.0, drive.demand)
+            if not self.controlwords or self.controlwords[-1] != drive.controlword:
+                self.controlwords.append(drive.controlword)
+            time.sleep(0.0005)
+
+    def wait_for(self, condition, timeout: float = SAFETY_TIMEOUT) -> None:
+        end = time.monotonic() + timeout
+        while not condition():
+            assert time.monotonic() < end, f"drive: {self.drive.state}, NMT {self.drive.nmt_state}"
+            time.sleep(0.005)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(5.0)
+
+
+@pytest.fixture
+def drive():
+    hub = SocketcandServer("127.0.0.1", 0, "can0").start()
+    served = DriveThread(hub)
+    served.hub = hub
+    yield served
+    served.stop()
+    hub.close()
+
+
+def _start_node(hopper_cli, hub):
+    process = hopper_cli("run", "motor_driver", "--ros-args", "-p", "interface:=socketcand",
+                         "-p", "host:=127.0.0.1", "-p", f"port:={hub.port}")
+    process.wait_for_line(r"drive 1 configured and started")
+    return process
+
+
+def _test_node(rclpy_session, name):
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hopper_ros.msg import MotorCommand, MotorStatus, NodeDiagnostics
+
+    node = rclpy_session.create_node(name)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    got = {"status": [], "diagnostics": []}
+    node.create_subscription(MotorStatus, "motor_status", got["status"].append, 100)
+    node.create_subscription(NodeDiagnostics, "diagnostics", got["diagnostics"].append, 10)
+    publisher = node.create_publisher(MotorCommand, "motor_command", 10)
+    assert spin_until(executor, lambda: publisher.get_subscription_count() and got["status"])
+
+    def command(mode: int, setpoint: float, seconds: float, until=lambda: True) -> None:
+        """Publish the command every ~2 ms for `seconds`, then on until `until()` holds."""
+        msg = MotorCommand(mode=mode, setpoint=setpoint)
+        start = time.monotonic()
+        while time.monotonic() - start < seconds or not until():
+            assert time.monotonic() - start < SAFETY_TIMEOUT, "condition not reached while commanding"
+            msg.header.stamp = node.get_clock().now().to_msg()
+            publisher.publish(msg)
+            executor.spin_once(timeout_sec=0.002)
+
+    return node, executor, got, command
+
+
+def test_node_drives_the_epos2_reports_and_stops_safely_on_sigterm(rclpy_session, hopper_cli, drive):
+    from hopper_ros.msg import MotorCommand, MotorStatus, NodeDiagnostics
+
+    process = _start_node(hopper_cli, drive.hub)
+    node, executor, got, command = _test_node(rclpy_session, "motor_driver_test")
+    try:
+        expected = 1.0 / (K_T * GEAR)
+        enabled = lambda msg: msg.state == MotorStatus.STATE_OPERATION_ENABLED and abs(msg.current - expected) < 1e-3  # noqa: E731
+        command(MotorCommand.MODE_CURRENT, 1.0, 0.3,
+                until=lambda: abs(drive.drive.demand - expected) < 1e-3 and any(map(enabled, got["status"][-20:])))
+        status = next(msg for msg in reversed(got["status"]) if enabled(msg))
+        assert status.state == MotorStatus.STATE_OPERATION_ENABLED and status.state_name == "OPERATION ENABLED"
+        assert status.commanded_mode == MotorCommand.MODE_CURRENT and status.operation_mode == -3
+        assert status.current == pytest.approx(1.595, abs=1e-3) and status.torque == pytest.approx(1.0, abs=1e-3)
+        assert status.heartbeat_ok and status.fault_code == 0
+        count = len(got["status"])
+        spin_until(executor, lambda: False, 0.2)
+        assert len(got["status"]) - count > 20                          # per SYNC (~1 kHz), not per status_period
+
+        # the stream stops: quick stop, then disabled, and said so
+        got["diagnostics"].clear()
+        drive.wait_for(lambda: drive.drive.state is State.SWITCH_ON_DISABLED, 1.0)
+        assert Command.QUICK_STOP in drive.controlwords[-3:]
+        assert spin_until(executor, lambda: got["status"][-1].state == MotorStatus.STATE_SWITCH_ON_DISABLED)
+        assert spin_until(executor, lambda: any(d.message == "command timeout: drive stopped"
+                                                for d in got["diagnostics"]))
+        report = next(d for d in got["diagnostics"] if d.message == "command timeout: drive stopped")
+        assert report.level == NodeDiagnostics.WARN
+        assert dict(zip(report.counter_names, report.counter_values))["watchdog_stops"] >= 1   # more if we stalled
+        process.wait_for_line(r"no motor command for \d+\.\d ms: quick stop")
+
+        # a drive fault: EMCY decoded into the EPOS2's words
+        command(MotorCommand.MODE_CURRENT, 1.0, 0.1, until=lambda: drive.drive.state is State.OPERATION_ENABLED)
+        drive.actions.put(lambda now: drive.drive.inject_fault(eo.ERROR_OVER_CURRENT, now))
+        assert spin_until(executor, lambda: got["status"][-1].state == MotorStatus.STATE_FAULT, 5.0)
+        assert (got["status"][-1].fault_code, got["status"][-1].fault_text) == (0x2310, "Over current error")
+        process.wait_for_line(r"drive EMCY 0x2310: Over current error")
+        command(MotorCommand.MODE_DISABLED, 0.0, 0.1,                  # acknowledge: fault reset
+                until=lambda: drive.drive.state is State.SWITCH_ON_DISABLED)
+        command(MotorCommand.MODE_CURRENT, -0.5, 0.1,
+                until=lambda: drive.drive.state is State.OPERATION_ENABLED and drive.drive.demand < 0)
+
+        # SIGTERM while the drive is enabled and commanded: disabled before the node goes
+        process.signal(signal.SIGTERM)
+        command(MotorCommand.MODE_CURRENT, -0.5, 0.2)
+        assert process.wait(SAFETY_TIMEOUT) == 0
+        assert drive.drive.state is State.SWITCH_ON_DISABLED and drive.drive.demand == 0.0
+        drive.wait_for(lambda: drive.drive.nmt_state == NmtState.PRE_OPERATIONAL, 2.0)
+        assert drive.drive.value(eo.CONSUMER_HEARTBEAT_TIME, 1) == 0
+        assert "drive disabled (confirmed by the drive)" in process.stderr
+        time.sleep(0.4)                                                 # past the drive's heartbeat consumer time
+        assert drive.drive.state is State.SWITCH_ON_DISABLED            # no fault: the consumer was switched off
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+
+
+def test_sigint_disables_the_drive_first(rclpy_session, hopper_cli, drive):
+    from hopper_ros.msg import MotorCommand
+
+    process = _start_node(hopper_cli, drive.hub)
+    node, executor, got, command = _test_node(rclpy_session, "motor_driver_sigint_test")
+    try:
+        command(MotorCommand.MODE_POSITION, 0.05, 0.1,
+                until=lambda: drive.drive.state is State.OPERATION_ENABLED and drive.drive.operation_mode == -1)
+        assert drive.drive.value(eo.POSITION_MODE_SETTING_VALUE) == round(0.05 * 52000 / (2 * math.pi))
+        process.signal(signal.SIGINT)
+        command(MotorCommand.MODE_POSITION, 0.05, 0.2)
+        assert process.wait(SAFETY_TIMEOUT) == 0
+        assert drive.drive.state is State.SWITCH_ON_DISABLED
+        assert drive.controlwords[-1] == Command.DISABLE_VOLTAGE
+        assert "stopping on SIGINT" in process.stderr and "drive disabled (confirmed by the drive)" in process.stderr
+    finally:
+        executor.shutdown()
+        node.destroy_node()
