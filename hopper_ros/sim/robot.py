@@ -22,6 +22,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
+from hopper_ros.canbus.epos2_objects import OperationMode
 from hopper_ros.hardware.encoders import BoomKinematics, to_register
 from hopper_ros.hardware.motor import HipMotor
 from hopper_ros.hardware.packet import EncoderPacket
@@ -70,18 +71,22 @@ class SimSample:
 
 
 class CommandHistory:
-    """Piecewise-constant command (one value per period) read back `delay` seconds late."""
+    """The motor current, one value per period: a commanded current (current mode) reaches the
+    motor `delay` seconds late (the actuation delay effect); the drive's own position regulator
+    acts at once (it runs inside the drive, after the delay)."""
 
     def __init__(self, delay: float) -> None:
         self.delay = delay
-        self._entries: deque[tuple[float, float]] = deque(maxlen=max(4, int(delay / 1e-4) + 4))
+        self._entries: deque[tuple[float, float, bool]] = deque(maxlen=max(4, int(delay / 1e-4) + 4))
 
-    def push(self, t_start: float, value: float) -> None:
-        self._entries.append((t_start, value))
+    def push(self, t_start: float, value: float, delayed: bool = True) -> None:
+        self._entries.append((t_start, value, delayed))
 
     def __call__(self, t: float) -> float:
+        if self._entries and not self._entries[-1][2]:
+            return self._entries[-1][1]
         when = t - self.delay
-        for t_start, value in reversed(self._entries):
+        for t_start, value, _ in reversed(self._entries):
             if t_start <= when + 1e-12:
                 return value
         return 0.0
@@ -131,15 +136,17 @@ class SimRobot:
     def step(self) -> SimSample:
         plant = self.plant
         t0 = plant.t
-        demand = 0.0
+        demand, commanded = 0.0, True
         if self.drive is not None:
             counts = self.kinematics.motor.count(plant.leg_angle)
             self.drive.poll(t0)
             demand = self.drive.control(t0, counts, self.motor.motor_speed_rpm(plant.leg_rate), self._current(t0))
+            commanded = self.drive.operation_mode == OperationMode.CURRENT
         elif self.experiment is not None:
             demand = self.experiment.current_demand(t0)
+            commanded = False       # the experiment's stance ramp is delayed in its torque function
         demand = max(-self.motor.current_limit, min(self.motor.current_limit, demand))
-        self._current.push(t0, demand)
+        self._current.push(t0, demand, delayed=commanded)
         if self.experiment is not None and self.drive is None:
             torque = self.experiment.torque_function(self._current, self.hip_torque, self.delay)
         else:

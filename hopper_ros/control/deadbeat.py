@@ -1,0 +1,208 @@
+"""The deadbeat controller of chapter 5: at each apex, tau_0 and theta_td for the next one.
+
+Section 5.1 splits the two-dimensional inversion of the return map (too slow for the thesis's
+1 ms loop) into
+- tau_0 from the energy balance (5.1)-(5.5), corrected (see physics/energy.py): the torque work
+  W_tau must supply the apex energy change plus the stride's losses,
+      W_tau(tau_0, theta) = m (y'*^2 - y'^2)/2 + m g (z* - z) + E_loss(tau_0, theta);
+- theta_td by the one-dimensional inversion (5.6): the angle whose predicted next apex height is z*.
+
+Here both use the predictor's own stride: its next-apex energy already is E + W_tau - E_loss
+(the energy budget closes, test_physics_energy), so the balance reads E_next(tau_0, theta) = E*.
+One batched predictor call evaluates a grid of touchdown angles around the previous stride's
+angle at two torques; per angle the balance is solved for tau_0 (W_tau is linear in tau_0 over
+the step), then (5.6) is solved by interpolation along the angles. The predictor is the
+corrected AAS by default (`physics.corrected`; the thesis's plain AAS leaves the steady offsets
+of its Figs 5.4-5.5), and the grid costs about what one stride does (numpy overhead bound).
+
+Beyond the thesis (issue 7): stride-to-stride adaptation. The model's error on the last stride,
+measured apex minus the model's prediction for the inputs applied, is averaged (gain
+`adaptation_gain`) into an apex bias that the inversion then aims around: with gain 1 this is
+pure integral action on the apex error. It removes the steady offset left by whatever the model
+lacks (the simulated robot's extra effects, sensing bias). Switchable.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+from hopper_ros.physics.params import ModelParams
+from hopper_ros.physics.predictors import PREDICTORS, predict_stride
+
+
+@dataclass(frozen=True)
+class DeadbeatSettings:
+    predictor: str = "corrected"
+    angle_span: float = 0.12          # [rad] the grid covers +/- this around the warm start
+    angle_points: int = 13            # grid size along theta
+    torque_step: float = 1.0          # [N m] second torque of the grid (W_tau linear over it)
+    min_torque: float = 0.0           # [N m]
+    max_torque: float = 12.0          # [N m] just below the drive's current limit (20 A: 12.5 N m)
+    min_angle: float = math.radians(2.0)
+    max_angle: float = math.radians(50.0)
+    initial_torque: float = 4.0       # [N m] warm start of the first stride
+    adaptation: bool = True
+    adaptation_gain: float = 0.5      # share of the last stride's model error added to the bias
+    max_bias_height: float = 0.03     # [m] bound on the learned height bias
+    max_bias_speed: float = 0.3       # [m/s] bound on the learned speed bias
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], source: str = "deadbeat settings") -> "DeadbeatSettings":
+        known = cls.__dataclass_fields__
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise ValueError(f"{source}: unknown setting(s) {unknown}; known: {sorted(known)}")
+        settings = cls(**values)
+        if settings.predictor not in PREDICTORS:
+            raise ValueError(f"{source}: predictor {settings.predictor!r} is not one of {PREDICTORS}")
+        if settings.angle_points < 3 or settings.angle_span <= 0 or settings.torque_step <= 0:
+            raise ValueError(f"{source}: angle_points >= 3, angle_span > 0 and torque_step > 0 needed")
+        if not 0.0 <= settings.adaptation_gain <= 1.0:
+            raise ValueError(f"{source}: adaptation_gain must be in [0, 1], got {settings.adaptation_gain}")
+        return settings
+
+
+@dataclass
+class StrideDecision:
+    """What to do in the stride that starts at this apex, and what the model expects."""
+
+    stride_index: int
+    feasible: bool
+    reason: str                      # "" when feasible and on target; else why (in words)
+    tau_0: float                     # [N m]
+    touchdown_angle: float           # [rad]
+    ramp_duration: float             # [s] the ramp ends at the predicted lift-off (2.29)
+    predicted_apex_height: float     # [m] next apex, model plus learned bias
+    predicted_forward_speed: float   # [m/s]
+    predicted_stride_time: float     # [s]
+    target_height: float
+    target_speed: float
+    model_apex_height: float = math.nan   # [m] the model alone, for the adaptation
+    model_forward_speed: float = math.nan
+    compute_time: float = 0.0        # [s] wall time of the decision
+    bias: tuple[float, float] = field(default=(0.0, 0.0))
+
+
+class DeadbeatController:
+    """Chapter 5's controller as a plain object: `decide` at each apex, `observe` the next apex."""
+
+    def __init__(self, params: ModelParams, settings: DeadbeatSettings | None = None) -> None:
+        self.params = params
+        self.settings = settings or DeadbeatSettings()
+        self.bias_height = 0.0
+        self.bias_speed = 0.0
+        self._warm_angle: float | None = None
+        self._warm_torque = self.settings.initial_torque
+        self._pending: StrideDecision | None = None
+
+    def reset_adaptation(self) -> None:
+        self.bias_height = self.bias_speed = 0.0
+
+    def neutral_angle(self, forward_speed: float) -> float:
+        """Touchdown angle of a symmetric stance (Raibert): theta = asin(y' T_s / (2 rho_0))."""
+        p = self.params
+        stance_time = math.pi / math.sqrt(p.stiffness / p.body_mass)
+        ratio = forward_speed * stance_time / (2.0 * p.rest_length)
+        return math.asin(max(-0.9, min(0.9, ratio)))
+
+    # ------------------------------------------------------------------ decision
+    def decide(self, apex_height: float, forward_speed: float, target_height: float, target_speed: float,
+               stride_index: int = 0) -> StrideDecision:
+        started = time.perf_counter()
+        s, p = self.settings, self.params
+        bias = (self.bias_height, self.bias_speed) if s.adaptation else (0.0, 0.0)
+        aim_height, aim_speed = target_height - bias[0], target_speed - bias[1]   # what the model must predict
+        center = self._warm_angle if self._warm_angle is not None else self.neutral_angle(forward_speed)
+        decision = self._solve(apex_height, forward_speed, aim_height, aim_speed, center, self._warm_torque)
+        if decision is not None and (decision[-1] == "outside" or abs(decision[0] - self._warm_torque) > 1.5 * s.torque_step):
+            # the solution left the grid (angle) or its linear range (torque): once more around it
+            decision = self._solve(apex_height, forward_speed, aim_height, aim_speed, decision[1], decision[0])
+        result = self._decision(stride_index, decision, target_height, target_speed, bias, forward_speed)
+        result.compute_time = time.perf_counter() - started
+        self._pending = result if result.feasible else None
+        return result
+
+    def _solve(self, apex_height, forward_speed, aim_height, aim_speed, center, warm_torque):
+        """One batched predictor call; (tau_0, theta, t_f, z, v, stride_time, status) or None."""
+        s, p = self.settings, self.params
+        angles = np.clip(center + np.linspace(-s.angle_span, s.angle_span, s.angle_points), s.min_angle, s.max_angle)
+        low = min(max(warm_torque - 0.5 * s.torque_step, s.min_torque), s.max_torque - s.torque_step)
+        torques = np.array([low, low + s.torque_step])
+        theta = np.tile(angles, 2)
+        tau = np.repeat(torques, angles.size)
+        n = angles.size
+        prediction = predict_stride(p, np.full(2 * n, apex_height), np.full(2 * n, forward_speed), theta, tau,
+                                    method=s.predictor)
+        ok = np.asarray(prediction.ok, dtype=bool)
+        z, v = np.asarray(prediction.next_apex_height), np.asarray(prediction.next_forward_speed)
+        energy = p.body_mass * (0.5 * v * v + p.gravity * z)
+        target_energy = p.body_mass * (0.5 * aim_speed ** 2 + p.gravity * aim_height)
+        valid = ok[:n] & ok[n:]
+        if not valid.any():
+            return None
+        gain = energy[n:] - energy[:n]                                  # W_tau per torque step
+        fraction = np.where(valid & (gain > 1e-9), (target_energy - energy[:n]) / np.where(gain > 1e-9, gain, 1.0), np.nan)
+        tau_needed = low + fraction * s.torque_step                    # energy balance (5.1)-(5.5) per angle
+        tau_used = np.clip(tau_needed, s.min_torque, s.max_torque)
+        share = (tau_used - low) / s.torque_step
+        height = z[:n] + share * (z[n:] - z[:n])
+        speed = v[:n] + share * (v[n:] - v[:n])
+        ramp = np.asarray(prediction.ramp_duration)
+        ramp = ramp[:n] + share * (ramp[n:] - ramp[:n])
+        stride_time = np.asarray(prediction.stride_time)
+        stride_time = stride_time[:n] + share * (stride_time[n:] - stride_time[:n])
+        miss = height - aim_height
+        usable = np.isfinite(miss)
+        if not usable.any():
+            return None
+        # (5.6): the angle where the predicted height crosses z*; among the crossings, those whose
+        # energy balance needs no torque clipping first, then the one nearest the warm start
+        clipped = tau_needed != tau_used
+        crossings = [i for i in range(n - 1) if usable[i] and usable[i + 1] and miss[i] * miss[i + 1] <= 0.0]
+        if crossings:
+            i = min(crossings, key=lambda j: (bool(clipped[j] or clipped[j + 1]), abs(angles[j] - center)))
+            w = miss[i] / (miss[i] - miss[i + 1]) if miss[i] != miss[i + 1] else 0.0
+            pick = lambda a: float(a[i] + w * (a[i + 1] - a[i]))  # noqa: E731
+            status = "torque limit" if (clipped[i] or clipped[i + 1]) else ""
+            return (pick(tau_used), pick(angles), pick(ramp), pick(height), pick(speed), pick(stride_time), status)
+        best = int(np.nanargmin(np.where(usable, np.abs(miss), np.nan)))
+        at_edge = best in (0, n - 1) and s.min_angle < angles[best] < s.max_angle
+        status = "outside" if at_edge else "height out of reach"
+        return (float(tau_used[best]), float(angles[best]), float(ramp[best]), float(height[best]),
+                float(speed[best]), float(stride_time[best]), status)
+
+    def _decision(self, stride_index, solved, target_height, target_speed, bias, forward_speed) -> StrideDecision:
+        if solved is None:
+            angle = self.neutral_angle(forward_speed)
+            return StrideDecision(stride_index, False, "no touchdown angle gives a stride the model can complete",
+                                  0.0, angle, 0.0, math.nan, math.nan, math.nan, target_height, target_speed, bias=bias)
+        tau_0, angle, ramp, height, speed, stride_time, status = solved
+        if status == "outside":
+            status = "height out of reach"
+        self._warm_angle, self._warm_torque = angle, tau_0
+        return StrideDecision(stride_index, True, status, tau_0, angle, ramp, height + bias[0], speed + bias[1],
+                              stride_time, target_height, target_speed, height, speed, bias=bias)
+
+    # ------------------------------------------------------------------ adaptation
+    def observe(self, apex_height: float, forward_speed: float) -> None:
+        """The apex that ends the stride last decided: learn the model's error (if adaptation is on)."""
+        decision, self._pending = self._pending, None
+        s = self.settings
+        if decision is None or not s.adaptation:
+            return
+        error_height = apex_height - decision.model_apex_height
+        error_speed = forward_speed - decision.model_forward_speed
+        if not (math.isfinite(error_height) and math.isfinite(error_speed)):
+            return
+        gain = s.adaptation_gain
+        self.bias_height = _clip(self.bias_height + gain * (error_height - self.bias_height), s.max_bias_height)
+        self.bias_speed = _clip(self.bias_speed + gain * (error_speed - self.bias_speed), s.max_bias_speed)
+
+
+def _clip(value: float, bound: float) -> float:
+    return max(-bound, min(bound, value))

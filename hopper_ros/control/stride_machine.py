@@ -1,0 +1,119 @@
+"""The hip's state machines: the closed-loop run of Fig 5.3 and the single-stride experiment of
+Fig 4.1, as plain objects that turn gait events and ticks into motor commands.
+
+Both share the phases of section 4.1:
+- POSITIONING: after an apex, the leg is moved to theta_td and held (drive position mode);
+- PRE_TOUCHDOWN: 2 cm above touchdown the position regulator is switched off ("to avoid any
+  jump backs just before colliding with the ground"): zero current;
+- STANCE: from touchdown the ramp -tau_0 (1 - t/t_f) (2.32), zero after t_f (current mode);
+- ASCENT: after lift-off the leg is held at its lift-off angle (position mode).
+The closed loop goes back to POSITIONING at each apex with a new decision (Fig 5.3); the
+single-stride experiment holds theta_td while waiting for the throw (INITIALISE) and ends in
+BRAKE after the second apex (leg held, then the drive disabled).
+
+Commands are (mode, setpoint) with MotorCommand's modes: 0 disabled, 1 current (hip torque
+[N m]), 2 position (leg angle [rad]). `command(now)` gives the command for time `now` [s] (the
+robot's clock: event times are in it), called on every state estimate so that the motor
+driver's watchdog is fed at 1 kHz.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+
+MODE_DISABLED, MODE_CURRENT, MODE_POSITION = 0, 1, 2
+
+
+class Phase(Enum):
+    IDLE = "idle"                   # nothing commanded yet (no setpoint or no apex)
+    INITIALISE = "initialise"       # single stride: leg held at theta_td, waiting for the apex
+    POSITIONING = "positioning"
+    PRE_TOUCHDOWN = "pre-touchdown"
+    STANCE = "stance"
+    ASCENT = "ascent"
+    BRAKE = "brake"                 # single stride: done
+    SAFE = "safe"                   # infeasible stride or fault: leg held, no torque
+
+
+@dataclass(frozen=True)
+class StridePlan:
+    """The inputs of one stride."""
+
+    tau_0: float             # [N m]
+    touchdown_angle: float   # [rad]
+    ramp_duration: float     # [s]
+
+
+class StrideMachine:
+    """Fig 5.3 (closed loop, `single_stride=False`) or Fig 4.1 (`single_stride=True`)."""
+
+    def __init__(self, single_stride: bool = False) -> None:
+        self.single_stride = single_stride
+        self.phase = Phase.IDLE
+        self.plan: StridePlan | None = None
+        self.hold_angle = math.nan
+        self.touchdown_time = math.nan
+        self.apexes = 0
+        self.reason = ""
+
+    # ------------------------------------------------------------------ inputs
+    def start_single_stride(self, plan: StridePlan) -> None:
+        """Fig 4.1's first phase: hold theta_td and wait for the robot to be thrown to an apex."""
+        self.single_stride = True
+        self.plan = plan
+        self.hold_angle = plan.touchdown_angle
+        self.apexes = 0
+        self.phase = Phase.INITIALISE
+
+    def on_apex(self, plan: StridePlan | None, reason: str = "") -> None:
+        """An apex: the closed loop takes the new plan (None: infeasible -> SAFE, leg held)."""
+        self.apexes += 1
+        if self.single_stride:
+            if self.phase is Phase.INITIALISE:
+                self.phase = Phase.POSITIONING
+            elif self.phase in (Phase.ASCENT, Phase.STANCE, Phase.PRE_TOUCHDOWN, Phase.POSITIONING):
+                self.phase = Phase.BRAKE
+            return
+        if plan is None:
+            self.phase, self.reason = Phase.SAFE, reason
+            return
+        self.plan, self.reason = plan, reason
+        self.hold_angle = plan.touchdown_angle
+        self.phase = Phase.POSITIONING
+
+    def on_pre_touchdown(self) -> None:
+        if self.phase is Phase.POSITIONING:
+            self.phase = Phase.PRE_TOUCHDOWN
+
+    def on_touchdown(self, time: float) -> None:
+        if self.phase in (Phase.POSITIONING, Phase.PRE_TOUCHDOWN):
+            self.touchdown_time = time
+            self.phase = Phase.STANCE
+
+    def on_liftoff(self, leg_angle: float) -> None:
+        if self.phase is Phase.STANCE:
+            self.hold_angle = leg_angle
+            self.phase = Phase.ASCENT
+
+    def fault(self, reason: str) -> None:
+        self.phase, self.reason = Phase.SAFE, reason
+
+    # ------------------------------------------------------------------ output
+    def command(self, now: float) -> tuple[int, float]:
+        """(mode, setpoint) for time `now` [s]."""
+        phase = self.phase
+        if phase is Phase.IDLE:
+            return MODE_DISABLED, 0.0
+        if phase is Phase.STANCE:
+            elapsed = now - self.touchdown_time
+            t_f = self.plan.ramp_duration
+            if 0.0 <= elapsed < t_f:
+                return MODE_CURRENT, -self.plan.tau_0 * (1.0 - elapsed / t_f)       # (2.32)
+            return MODE_CURRENT, 0.0
+        if phase is Phase.PRE_TOUCHDOWN:
+            return MODE_CURRENT, 0.0
+        if math.isfinite(self.hold_angle):
+            return MODE_POSITION, self.hold_angle
+        return MODE_DISABLED, 0.0

@@ -1,0 +1,110 @@
+"""The deadbeat controller (chapter 5) and the hip state machines, without ROS.
+
+Closed loop on the simulated robot in lockstep (hopper_ros.control.lockstep): the robot of
+config/sim.yaml with flight damping, lift-off collision and boom gravity on.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from hopper_ros.config import load_yaml
+from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings
+from hopper_ros.control.lockstep import run_closed_loop, summarise
+from hopper_ros.control.stride_machine import MODE_CURRENT, MODE_DISABLED, MODE_POSITION, Phase, StrideMachine, StridePlan
+from hopper_ros.physics.params import load_params
+from hopper_ros.physics.predictors import predict_stride
+from hopper_ros.sim.config import load_sim_config
+
+HARDWARE = load_yaml("hardware.yaml")
+SETTINGS = DeadbeatSettings.from_mapping(load_yaml("control.yaml")["deadbeat"], "control.yaml")
+FIG_5_5 = [(0.39, 2.0)] * 20 + [(0.42, 2.0)] * 20 + [(0.38, 2.5)] * 20
+
+
+def controller(**changes) -> DeadbeatController:
+    values = {name: getattr(SETTINGS, name) for name in SETTINGS.__dataclass_fields__} | changes
+    return DeadbeatController(load_params(), DeadbeatSettings(**values))
+
+
+def test_decision_hits_the_model_return_map():
+    ctl = controller(adaptation=False)
+    decision = ctl.decide(0.40, 1.95, 0.39, 2.0)
+    assert decision.feasible and decision.reason == ""
+    check = predict_stride(ctl.params, 0.40, 1.95, decision.touchdown_angle, decision.tau_0, decision.ramp_duration)
+    assert check.next_apex_height == pytest.approx(0.39, abs=1e-3)       # the grid interpolation's error
+    assert check.next_forward_speed == pytest.approx(2.0, abs=5e-3)
+    assert 0.0 < decision.tau_0 < SETTINGS.max_torque
+    assert decision.ramp_duration == pytest.approx(check.ramp_duration, rel=1e-2)
+
+
+def test_infeasible_strides_fall_back_safely_and_say_why():
+    ctl = controller()
+    decision = ctl.decide(0.10, 2.0, 0.39, 2.0)          # the toe is already in the ground
+    assert not decision.feasible and decision.tau_0 == 0.0 and "no touchdown angle" in decision.reason
+    unreachable = ctl.decide(0.30, 1.0, 0.60, 3.5)        # far more energy than 12 N m can give
+    assert unreachable.feasible and unreachable.tau_0 == SETTINGS.max_torque
+    assert unreachable.reason in ("torque limit", "height out of reach")
+
+
+@pytest.mark.parametrize("adaptation", [True, False])
+def test_closed_loop_follows_the_fig_5_5_schedule(adaptation):
+    records = run_closed_loop(controller(adaptation=adaptation), load_sim_config(), HARDWARE, FIG_5_5)
+    assert len(records) == len(FIG_5_5) and all(math.isfinite(r.apex_height) for r in records)   # no fall
+    for segment in summarise(records):
+        assert segment.strides_to_settle is not None and segment.strides_to_settle <= 3
+        if adaptation:
+            assert segment.height_error_pct < 1.0 and segment.speed_error_pct < 1.0
+
+
+def test_adaptation_removes_the_offset_of_physics_the_model_lacks():
+    sim = load_sim_config().with_effects(ground_compliance=True, touchdown_impact=True)
+    schedule = [(0.39, 2.0)] * 25
+    plain = summarise(run_closed_loop(controller(adaptation=False), sim, HARDWARE, schedule))[0]
+    adapted = summarise(run_closed_loop(controller(adaptation=True), sim, HARDWARE, schedule))[0]
+    assert plain.height_error_pct > 0.5                 # the model alone keeps an offset...
+    assert adapted.height_error_pct < 0.2 * plain.height_error_pct and adapted.speed_error_pct < 0.2
+
+
+def test_two_hundred_strides_without_a_fall():
+    schedule = [FIG_5_5[i % len(FIG_5_5)] for i in range(200)]
+    records = run_closed_loop(controller(), load_sim_config(), HARDWARE, schedule)
+    assert len(records) == 200 and all(math.isfinite(r.apex_height) and r.feasible for r in records)
+
+
+def test_stride_machine_runs_fig_5_3():
+    machine = StrideMachine()
+    assert machine.command(0.0) == (MODE_DISABLED, 0.0)
+    machine.on_apex(StridePlan(tau_0=6.0, touchdown_angle=0.4, ramp_duration=0.1))
+    assert machine.command(0.05) == (MODE_POSITION, 0.4)
+    machine.on_touchdown(1.0)                                   # missed pre-touchdown: still a stance
+    machine.on_pre_touchdown()
+    assert machine.phase is Phase.STANCE
+    assert machine.command(1.0) == (MODE_CURRENT, pytest.approx(-6.0))
+    assert machine.command(1.05) == (MODE_CURRENT, pytest.approx(-3.0))
+    assert machine.command(1.2) == (MODE_CURRENT, 0.0)          # after t_f
+    machine.on_liftoff(-0.3)
+    assert machine.command(1.3) == (MODE_POSITION, -0.3)
+    machine.on_apex(None, "no touchdown angle")
+    assert machine.phase is Phase.SAFE and machine.command(1.5) == (MODE_POSITION, -0.3)
+
+
+def test_single_stride_experiment_runs_fig_4_1_and_brakes():
+    machine = StrideMachine()
+    machine.start_single_stride(StridePlan(5.0, 0.3, 0.1))
+    assert machine.phase is Phase.INITIALISE and machine.command(0.0) == (MODE_POSITION, 0.3)
+    machine.on_apex(None)                                        # the throw's apex
+    machine.on_pre_touchdown()
+    assert machine.command(0.2) == (MODE_CURRENT, 0.0)          # position regulator off
+    machine.on_touchdown(0.25)
+    machine.on_liftoff(-0.2)
+    machine.on_apex(None)
+    assert machine.phase is Phase.BRAKE and machine.command(0.8) == (MODE_POSITION, -0.2)
+
+
+def test_bad_settings_name_the_problem():
+    with pytest.raises(ValueError, match="unknown setting"):
+        DeadbeatSettings.from_mapping({"gain": 1.0})
+    with pytest.raises(ValueError, match="predictor 'magic'"):
+        DeadbeatSettings.from_mapping({"predictor": "magic"})
