@@ -216,3 +216,19 @@ def test_bad_sim_config_names_the_problem():
     with pytest.raises(ValueError, match="toe"):
         SimRobot(BASE, HARDWARE).throw(0.1, 1.0, 0.3)
     assert math.isfinite(BASE.gravity)
+
+
+def test_a_throw_with_lead_time_rises_into_the_requested_apex_and_hold_waits():
+    robot = SimRobot(BASE, HARDWARE)
+    robot.throw(0.38, 1.7, 0.3, lead_time=0.05, hold=True)
+    start = robot.plant.state[:4]
+    assert start[3] > 0.0                                     # rising
+    for _ in range(100):
+        robot.step()
+    assert robot.plant.state[:4] == start                     # held: the body does not move
+    robot.plant.release()
+    events = []
+    while not events:
+        events = [e for e in robot.step().events if e.kind == "apex"]
+    assert events[0].t == pytest.approx(0.1 + 0.05, abs=1e-9)
+    assert events[0].z == pytest.approx(0.38, abs=1e-9) and events[0].ydot == pytest.approx(1.7, abs=1e-9)

@@ -127,7 +127,7 @@ def test_canopen_master_in_another_process_drives_the_simulated_epos2(hopper_cli
     udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     udp.bind(("127.0.0.1", 0))
     node = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=hub", "-p", f"can_port:={hub_port}",
-                      "-p", f"udp_port:={udp.getsockname()[1]}")
+                      "-p", f"udp_port:={udp.getsockname()[1]}", "-p", "hold:=true")   # held: the leg swings free
     node.wait_for_line(rf"CAN hub on 127.0.0.1:{hub_port}")
     network = canopen.Network()
     network.connect(interface="socketcand", host="127.0.0.1", port=hub_port, channel="can0")

@@ -10,7 +10,8 @@ Steps the physics once per 1 ms period in a thread of its own and, like the robo
 - publishes the force plate on `force_plate` (GroundReactionForce, 1 kHz).
 For tests and the mismatch tool it also publishes the ground truth: `sim/truth` (BodyState,
 1 kHz) and `sim/events` (GaitEvent, true event times). `sim/throw` (ApexState: apex_height,
-forward_speed, leg_angle, y) throws the robot to a new apex, as the researcher does by hand.
+forward_speed, leg_angle, y) throws the robot to a new apex, as the researcher does by hand
+(an apex_height of 0 releases the held robot as it is).
 
 Parameters (read only):
   sim_file, hardware_file: configuration (default sim.yaml, hardware.yaml)
@@ -19,6 +20,9 @@ Parameters (read only):
   udp_host, udp_port: override hardware.yaml's microcontroller destination
   enable_effects, disable_effects: effect names to switch on/off (see config/sim.yaml)
   apex_height, forward_speed, leg_angle: the initial throw (default: sim.yaml initial_apex)
+  throw_lead: throws start this long before their apex, rising, so the apex is a natural one
+      the sensing sees (default 0.05 s); hold: the robot is held at its first throw's start
+      until the first `sim/throw` (as the researcher holds it until the graph is up)
   duration: simulated time to run [s], then the node ends (0: run until stopped)
   experiments: run section 4.1's single-stride experiments itself, one after another, inputs
       drawn from the thesis's ranges (data collection without a controller; needs can:=none)
@@ -94,6 +98,8 @@ class SimRobotNode(Node):
         leg_angle = param("leg_angle", apex["leg_angle"], "initial leg angle [rad]")
         self.duration = param("duration", 0.0, "simulated time to run [s], 0: until stopped")
         experiments = param("experiments", False, "run built-in single-stride experiments (can:=none)")
+        hold = param("hold", False, "hold the robot at its first throw until sim/throw")
+        self.throw_lead = param("throw_lead", 0.05, "throws start this long before the apex [s]")
         if self.mode not in ("realtime", "lockstep"):
             raise ValueError(f"mode must be realtime or lockstep, got {self.mode!r}")
         if udp_host not in ("127.0.0.1", "localhost"):
@@ -103,7 +109,7 @@ class SimRobotNode(Node):
             raise ValueError("experiments:=true runs the hip itself: it needs can:=none (no drive on a bus)")
         self.drive, self._close_drive = open_drive(can_setting, hardware, can_port)
         self.robot = SimRobot(config, hardware, drive=self.drive)
-        self.robot.throw(apex_height, forward_speed, leg_angle)
+        self.robot.throw(apex_height, forward_speed, leg_angle, lead_time=self.throw_lead, hold=hold)
         self.series = ExperimentSeries(self.robot, seed=config.seed) if experiments else None
         self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._udp_address = ("127.0.0.1", int(udp_port))
@@ -152,7 +158,7 @@ class SimRobotNode(Node):
             with self._lock:
                 throw, self._pending_throw = self._pending_throw, None
             if throw is not None:
-                self.robot.throw(*throw)
+                self.robot.throw(*throw, lead_time=self.throw_lead)
                 self.counters["throws"] += 1
             self._emit(self.robot.step())
             if realtime:
@@ -208,6 +214,10 @@ class SimRobotNode(Node):
 
     # ------------------------------------------------------------------ ROS side
     def _on_throw(self, msg: ApexState) -> None:
+        if msg.apex_height == 0.0:
+            self.robot.plant.release()
+            self.get_logger().info("released")
+            return
         with self._lock:
             self._pending_throw = (msg.apex_height, msg.forward_speed, msg.leg_angle, msg.y)
         self.get_logger().info(f"thrown to apex {msg.apex_height:.3f} m at {msg.forward_speed:.2f} m/s")

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from hopper_ros.physics.exact import COLLAPSE_FRACTION, MAX_LEG_ANGLE, Phase
+from hopper_ros.physics.flight import flight_state
 
 from .config import SimConfig
 
@@ -81,6 +82,7 @@ class Plant:
         self.state = [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
         self.in_contact = False
         self.fallen = False
+        self.held = False            # held by hand at the throw's pose until released
         self.toe_y = math.nan
         self.touchdown_time = math.nan
         self.phase = Phase.DESCENT
@@ -88,16 +90,34 @@ class Plant:
         self.torque_now = 0.0
 
     # ------------------------------------------------------------------ set-up
-    def throw(self, apex_height: float, forward_speed: float, leg_angle: float, y: float = 0.0, t: float = 0.0) -> None:
-        """Start at an apex, in flight, the leg held at `leg_angle` (section 4.1's throw)."""
+    def throw(self, apex_height: float, forward_speed: float, leg_angle: float, y: float = 0.0, t: float = 0.0,
+              lead_time: float = 0.0, hold: bool = False) -> None:
+        """Throw the robot so that it reaches this apex (section 4.1's throw), the leg at `leg_angle`.
+
+        With `lead_time` the robot starts that long before the apex, still rising on the flight
+        closed form (2.13)-(2.16) run backwards, so that the apex is a natural one the sensing
+        sees; else it starts at the apex. With `hold` it is held there until `release()`.
+        """
         if apex_height - self.rest_length * math.cos(leg_angle) <= 0.0:
             raise ValueError(f"apex height {apex_height} m puts the toe ({leg_angle} rad) into the ground")
+        y0, z0, ydot0, zdot0 = (float(v) for v in flight_state(-lead_time, y, apex_height, forward_speed, 0.0,
+                                                               self.gravity, self.damping_h, self.damping_v))
+        if z0 - self.rest_length * math.cos(leg_angle) <= 0.0:
+            raise ValueError(f"a lead time of {lead_time} s before apex {apex_height} m puts the toe into the ground")
         self.t = t
-        self.state = [y, apex_height, forward_speed, 0.0, leg_angle, 0.0, 0.0]
-        self.in_contact, self.fallen = False, False
+        self.state = [y0, z0, ydot0, zdot0, leg_angle, 0.0, 0.0]
+        self.in_contact, self.fallen, self.held = False, False, hold
         self.toe_y, self.touchdown_time = math.nan, math.nan
-        self.phase = Phase.DESCENT
-        self.events = [self._event("apex", t, self.state)]
+        if lead_time > 0.0:
+            self.phase = Phase.ASCENT
+            self.events = []
+        else:
+            self.phase = Phase.DESCENT
+            self.events = [self._event("apex", t, self.state)]
+
+    def release(self) -> None:
+        """Let go of a robot held by `throw(..., hold=True)`."""
+        self.held = False
 
     # ------------------------------------------------------------------ dynamics
     def _flight_rhs(self, t: float, s: list, torque: TorqueFunction) -> list:
@@ -175,7 +195,7 @@ class Plant:
 
     def _substep(self, h: float, torque: TorqueFunction) -> None:
         t0, s0 = self.t, self.state
-        if self.fallen:  # the body lies still on the boom's stop; the leg still swings
+        if self.fallen or self.held:  # the body lies on the boom's stop or is held; the leg still swings
             self.t, self.state = t0 + h, self._rk4(t0, s0, h, self._fallen_rhs, torque)
             return
         if self.in_contact:

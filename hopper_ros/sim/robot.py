@@ -114,9 +114,10 @@ class SimRobot:
         self._force_noise = config.sensor("force_plate_noise", "force")
 
     # ------------------------------------------------------------------ set-up
-    def throw(self, apex_height: float, forward_speed: float, leg_angle: float, y: float = 0.0) -> None:
-        """Put the robot at an apex (z' = 0) with the leg at `leg_angle`, as the thesis's throw."""
-        self.plant.throw(apex_height, forward_speed, leg_angle, y=y, t=self.plant.t)
+    def throw(self, apex_height: float, forward_speed: float, leg_angle: float, y: float = 0.0,
+              lead_time: float = 0.0, hold: bool = False) -> None:
+        """Throw the robot to an apex with the leg at `leg_angle`, as the thesis does (see Plant.throw)."""
+        self.plant.throw(apex_height, forward_speed, leg_angle, y=y, t=self.plant.t, lead_time=lead_time, hold=hold)
 
     def run_experiment(self, experiment) -> None:
         """Let the built-in single-stride experiment command the hip (instead of the drive)."""
