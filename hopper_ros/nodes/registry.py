@@ -10,4 +10,5 @@ NODES = {
     "stride_predictor": "hopper_ros.nodes.stride_predictor:main",
     "motor_driver": "hopper_ros.nodes.motor_driver:main",
     "sim_robot": "hopper_ros.nodes.sim_robot:main",
+    "deadbeat_controller": "hopper_ros.nodes.deadbeat_controller:main",
 }

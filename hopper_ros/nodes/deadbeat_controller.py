@@ -1,0 +1,193 @@
+"""deadbeat_controller: chapter 5's controller (Fig 5.3), or the single-stride experiment of Fig 4.1.
+
+Closed loop (`experiment:=closed_loop`, default): at each apex (`apex`, ApexState, from the
+event detector) it decides tau_0 by the energy balance (5.1)-(5.5) and theta_td by the
+inversion (5.6) for the setpoint in force (`apex_setpoint`, latched, e.g. from
+setpoint_scheduler), publishes the decision on `stride_command` (StrideCommand), and drives the
+hip through the stride (hopper_ros.control.stride_machine): leg to theta_td (position), zero
+current 2 cm above touchdown, the ramp from touchdown (current), the lift-off angle held after
+lift-off. An infeasible stride holds the leg and applies no torque, and the command says why.
+A drive fault (motor_status) also ends in that safe state until the next apex.
+
+Single stride (`experiment:=single_stride`, with `tau_0` and `touchdown_angle`): Fig 4.1 for
+data collection; the ramp ends at the model's predicted lift-off for the apex the robot is
+thrown to; after the second apex the leg is held and then the drive disabled.
+
+A MotorCommand goes out for every state estimate (`body_state`, 1 kHz), which feeds the motor
+driver's watchdog; the stride phase advances on `gait_event`. The logic is in
+hopper_ros.control (no ROS); this node only connects it.
+
+Parameters (read only): model_file (model.yaml), config_file (control.yaml), experiment,
+tau_0, touchdown_angle, adaptation (overrides control.yaml).
+"""
+
+from __future__ import annotations
+
+import math
+
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from hopper_ros.config import load_yaml
+from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings, StrideDecision
+from hopper_ros.control.stride_machine import Phase, StrideMachine, StridePlan
+from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorCommand, MotorStatus, NodeDiagnostics, StrideCommand
+from hopper_ros.nodes.common import run_node
+from hopper_ros.physics.params import load_params
+from hopper_ros.physics.predictors import predict_stride
+
+SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+FAULT_STATES = (MotorStatus.STATE_FAULT, MotorStatus.STATE_FAULT_REACTION_ACTIVE)
+
+
+def _seconds(stamp) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+class DeadbeatControllerNode(Node):
+    def __init__(self, **node_kwargs):
+        super().__init__("deadbeat_controller", **node_kwargs)
+        param = lambda name, default, text: self.declare_parameter(  # noqa: E731
+            name, default, ParameterDescriptor(description=text, read_only=True)).value
+        model_file = param("model_file", "model.yaml", "model parameters (YAML)")
+        config_file = param("config_file", "control.yaml", "controller settings (YAML)")
+        self.experiment = param("experiment", "closed_loop", "closed_loop or single_stride")
+        tau_0 = param("tau_0", math.nan, "single stride: initial torque [N m]")
+        touchdown_angle = param("touchdown_angle", math.nan, "single stride: touchdown angle [rad]")
+        adaptation = param("adaptation", "", "override control.yaml: true or false")
+        settings = dict(load_yaml(config_file).get("deadbeat", {}))
+        if adaptation:
+            if adaptation not in ("true", "false"):
+                raise ValueError(f"adaptation must be true or false, got {adaptation!r}")
+            settings["adaptation"] = adaptation == "true"
+        self.params = load_params(model_file)
+        self.controller = DeadbeatController(self.params, DeadbeatSettings.from_mapping(settings, config_file))
+        self.machine = StrideMachine()
+        if self.experiment == "single_stride":
+            if not (math.isfinite(tau_0) and math.isfinite(touchdown_angle)):
+                raise ValueError("experiment:=single_stride needs the parameters tau_0 and touchdown_angle")
+            self.single = (tau_0, touchdown_angle)
+            self.machine.start_single_stride(StridePlan(tau_0, touchdown_angle, math.inf))
+        elif self.experiment != "closed_loop":
+            raise ValueError(f"experiment must be closed_loop or single_stride, got {self.experiment!r}")
+        self.setpoint: tuple[float, float] | None = None
+        self.counters = {"strides": 0, "infeasible": 0, "faults": 0, "commands": 0}
+        self.last_decision: StrideDecision | None = None
+        self._brake_since = math.nan
+
+        self._command_pub = self.create_publisher(MotorCommand, "motor_command", COMMAND_QOS)
+        self._stride_pub = self.create_publisher(StrideCommand, "stride_command", 10)
+        self._diagnostics_pub = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        self.create_subscription(ApexState, "apex_setpoint", self._on_setpoint, SETPOINT_QOS)
+        self.create_subscription(ApexState, "apex", self._on_apex, 10)
+        self.create_subscription(GaitEvent, "gait_event", self._on_event, 10)
+        self.create_subscription(BodyState, "body_state", self._on_state, COMMAND_QOS)
+        self.create_subscription(MotorStatus, "motor_status", self._on_motor_status, COMMAND_QOS)
+        self.create_timer(1.0, self._report)
+        self._command = MotorCommand()
+        s = self.controller.settings
+        self.get_logger().info(
+            f"{self.experiment}: predictor {s.predictor}, adaptation {'on' if s.adaptation else 'off'}, model {model_file}")
+
+    # ------------------------------------------------------------------ inputs
+    def _on_setpoint(self, msg: ApexState) -> None:
+        self.setpoint = (msg.apex_height, msg.forward_speed)
+        self.get_logger().info(f"setpoint: apex {msg.apex_height:.3f} m at {msg.forward_speed:.2f} m/s")
+
+    def _on_apex(self, msg: ApexState) -> None:
+        if self.experiment == "single_stride":
+            self._single_stride_apex(msg)
+            return
+        self.controller.observe(msg.apex_height, msg.forward_speed)
+        if self.setpoint is None:
+            return
+        decision = self.controller.decide(msg.apex_height, msg.forward_speed, *self.setpoint, msg.stride_index)
+        self.last_decision = decision
+        self.counters["strides"] += 1
+        if decision.feasible:
+            self.machine.on_apex(StridePlan(decision.tau_0, decision.touchdown_angle, decision.ramp_duration),
+                                 decision.reason)
+        else:
+            self.counters["infeasible"] += 1
+            self.machine.on_apex(None, decision.reason)
+            self.machine.hold_angle = decision.touchdown_angle
+            self.get_logger().warning(f"stride {msg.stride_index}: infeasible ({decision.reason}); leg held, no torque")
+        self._publish_decision(decision)
+
+    def _single_stride_apex(self, msg: ApexState) -> None:
+        if self.machine.phase is Phase.INITIALISE:
+            tau_0, angle = self.single
+            prediction = predict_stride(self.params, msg.apex_height, msg.forward_speed, angle, tau_0)
+            ramp = prediction.ramp_duration if prediction.ok else 0.0
+            self.machine.plan = StridePlan(tau_0, angle, ramp)
+            decision = StrideDecision(msg.stride_index, bool(prediction.ok), prediction.failure, tau_0, angle, ramp,
+                                      prediction.next_apex_height, prediction.next_forward_speed,
+                                      prediction.stride_time, math.nan, math.nan)
+            self._publish_decision(decision)
+        self.machine.on_apex(None)
+        if self.machine.phase is Phase.BRAKE:
+            self.get_logger().info("single stride done: braking")
+
+    def _on_event(self, msg: GaitEvent) -> None:
+        when = _seconds(msg.header.stamp)
+        if msg.type == GaitEvent.PRE_TOUCHDOWN:
+            self.machine.on_pre_touchdown()
+        elif msg.type == GaitEvent.TOUCHDOWN:
+            self.machine.on_touchdown(when)
+        elif msg.type == GaitEvent.LIFTOFF:
+            self.machine.on_liftoff(msg.state.leg_angle)
+
+    def _on_motor_status(self, msg: MotorStatus) -> None:
+        if msg.state in FAULT_STATES and self.machine.phase is not Phase.SAFE:
+            self.counters["faults"] += 1
+            self.machine.fault(f"drive fault 0x{msg.fault_code:04X}: {msg.fault_text}")
+            self.get_logger().error(self.machine.reason)
+
+    def _on_state(self, msg: BodyState) -> None:
+        now = _seconds(msg.header.stamp)
+        mode, setpoint = self.machine.command(now)
+        if self.machine.phase is Phase.BRAKE:
+            if math.isnan(self._brake_since):
+                self._brake_since = now
+            elif now - self._brake_since > 0.5:
+                mode, setpoint = MotorCommand.MODE_DISABLED, 0.0     # the robot sits back: drive off
+        command = self._command
+        command.header.stamp = msg.header.stamp
+        command.mode, command.setpoint = mode, float(setpoint)
+        self._command_pub.publish(command)
+        self.counters["commands"] += 1
+
+    # ------------------------------------------------------------------ outputs
+    def _publish_decision(self, decision: StrideDecision) -> None:
+        msg = StrideCommand()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.stride_index = decision.stride_index
+        msg.feasible, msg.reason = decision.feasible, decision.reason
+        msg.tau_0, msg.touchdown_angle = decision.tau_0, decision.touchdown_angle
+        msg.predicted_liftoff_time = decision.ramp_duration
+        msg.predicted_apex_height = decision.predicted_apex_height
+        msg.predicted_forward_speed = decision.predicted_forward_speed
+        msg.predicted_stride_time = decision.predicted_stride_time
+        msg.target_apex_height, msg.target_forward_speed = decision.target_height, decision.target_speed
+        self._stride_pub.publish(msg)
+
+    def _report(self) -> None:
+        msg = NodeDiagnostics()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.node_name = self.get_fully_qualified_name()
+        msg.counter_names = list(self.counters)
+        msg.counter_values = [int(v) for v in self.counters.values()]
+        decision = self.last_decision
+        msg.value_names = ["bias_height_m", "bias_speed_m_s", "decision_time_s"]
+        msg.values = [self.controller.bias_height, self.controller.bias_speed,
+                      decision.compute_time if decision else math.nan]
+        msg.level = NodeDiagnostics.WARN if self.machine.phase is Phase.SAFE else NodeDiagnostics.OK
+        msg.message = self.machine.reason if self.machine.phase is Phase.SAFE else ""
+        self._diagnostics_pub.publish(msg)
+
+
+def main(args=None):
+    return run_node(DeadbeatControllerNode, args)

@@ -1,0 +1,91 @@
+"""deadbeat_controller as a process, on real topics: decisions, the stride's motor commands."""
+
+from __future__ import annotations
+
+import math
+import signal
+
+import pytest
+
+from conftest import spin_until
+
+
+def stamp(seconds: float):
+    from builtin_interfaces.msg import Time
+
+    sec = math.floor(seconds)
+    return Time(sec=int(sec), nanosec=int(round((seconds - sec) * 1e9)))
+
+
+def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_cli):
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorCommand, StrideCommand
+
+    node_process = hopper_cli("run", "deadbeat_controller")
+    node_process.wait_for_line(r"closed_loop: predictor corrected, adaptation on")
+    node = rclpy_session.create_node("controller_test")
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    setpoint = node.create_publisher(ApexState, "apex_setpoint", latched)
+    apex = node.create_publisher(ApexState, "apex", 10)
+    events = node.create_publisher(GaitEvent, "gait_event", 10)
+    states = node.create_publisher(BodyState, "body_state", 10)
+    commands, strides = [], []
+    best_effort = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+    node.create_subscription(MotorCommand, "motor_command", commands.append, best_effort)
+    node.create_subscription(StrideCommand, "stride_command", strides.append, 10)
+
+    def tick(t: float) -> MotorCommand:
+        commands.clear()
+        states.publish(_state(t))
+        assert spin_until(executor, lambda: commands, timeout=10.0)
+        return commands[-1]
+
+    def _state(t):
+        message = BodyState()
+        message.header.stamp = stamp(t)
+        return message
+
+    try:
+        assert spin_until(executor, lambda: apex.get_subscription_count() and states.get_subscription_count()
+                          and events.get_subscription_count() and setpoint.get_subscription_count()
+                          and node.count_publishers("motor_command"))
+        setpoint.publish(ApexState(apex_height=0.39, forward_speed=2.0))
+        assert tick(10.0).mode == MotorCommand.MODE_DISABLED             # nothing to do before an apex
+        apex.publish(ApexState(stride_index=3, apex_height=0.39, forward_speed=2.0))
+        assert spin_until(executor, lambda: strides)
+        decision = strides[-1]
+        assert decision.feasible and decision.stride_index == 3 and decision.target_apex_height == 0.39
+        assert 0.0 < decision.tau_0 < 12.5 and 0.2 < decision.touchdown_angle < 0.6
+        assert decision.predicted_apex_height == pytest.approx(0.39, abs=2e-3)
+        flight = tick(10.05)
+        assert (flight.mode, flight.setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(decision.touchdown_angle))
+        events.publish(GaitEvent(type=GaitEvent.PRE_TOUCHDOWN))
+        spin_until(executor, lambda: False, timeout=0.2)
+        assert tick(10.15).setpoint == 0.0                                 # position regulator off
+        touchdown = GaitEvent(type=GaitEvent.TOUCHDOWN)
+        touchdown.header.stamp = stamp(10.2)
+        events.publish(touchdown)
+        spin_until(executor, lambda: False, timeout=0.2)
+        ramp = tick(10.22)
+        expected = -decision.tau_0 * (1.0 - 0.02 / decision.predicted_liftoff_time)
+        assert ramp.mode == MotorCommand.MODE_CURRENT and ramp.setpoint == pytest.approx(expected, rel=1e-6)
+        liftoff = GaitEvent(type=GaitEvent.LIFTOFF)
+        liftoff.state.leg_angle = -0.31
+        events.publish(liftoff)
+        spin_until(executor, lambda: False, timeout=0.2)
+        assert (tick(10.3).mode, tick(10.31).setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(-0.31))
+
+        apex.publish(ApexState(stride_index=4, apex_height=0.12, forward_speed=2.0))   # toe in the ground
+        assert spin_until(executor, lambda: len(strides) == 2)
+        assert not strides[-1].feasible and "no touchdown angle" in strides[-1].reason and strides[-1].tau_0 == 0.0
+        held = tick(10.6)
+        assert held.mode == MotorCommand.MODE_POSITION
+    finally:
+        node_process.signal(signal.SIGINT)
+        assert node_process.wait() == 0
+        executor.shutdown()
+        node.destroy_node()
