@@ -7,13 +7,19 @@ Section 5.1 splits the two-dimensional inversion of the return map (too slow for
       W_tau(tau_0, theta) = m (y'*^2 - y'^2)/2 + m g (z* - z) + E_loss(tau_0, theta);
 - theta_td by the one-dimensional inversion (5.6): the angle whose predicted next apex height is z*.
 
-Here both use the predictor's own stride: its next-apex energy already is E + W_tau - E_loss
-(the energy budget closes, test_physics_energy), so the balance reads E_next(tau_0, theta) = E*.
-One batched predictor call evaluates a grid of touchdown angles around the previous stride's
-angle at two torques; per angle the balance is solved for tau_0 (W_tau is linear in tau_0 over
-the step), then (5.6) is solved by interpolation along the angles. The predictor is the
-corrected AAS by default (`physics.corrected`; the thesis's plain AAS leaves the steady offsets
-of its Figs 5.4-5.5), and the grid costs about what one stride does (numpy overhead bound).
+Both equations use a predictor's own stride: its next-apex energy already is E + W_tau - E_loss
+(the energy budget closes, test_physics_energy), so the balance reads E_next(tau_0, theta) = E*,
+solved together with z_next(tau_0, theta) = z* (5.6). Two stages, so that the 1 ms loop never
+waits (the thesis's 2-D optimiser could not fit in it):
+
+1. `first_decision`, within ~0.3 ms: Newton on the thesis's AAS (scalar closed forms, ~30 us per
+   stride) from the last stride's inputs, aimed at the setpoint corrected by what the corrected
+   predictor said about the AAS at the last stride (its defect). The leg starts moving at once.
+2. `refine`, during the flight (~1 ms; the flight lasts >100 ms): the same inversion on the
+   corrected AAS (`physics.corrected`, 40-250 times more accurate): one batched call evaluates a
+   grid of touchdown angles around stage 1's at two torques; per angle the energy balance gives
+   tau_0 (W_tau is linear in tau_0 over the step), and (5.6) is solved by interpolation along the
+   angles. Stage 2's inputs are the stride's; it also renews the defect for the next stage 1.
 
 Beyond the thesis (issue 7): stride-to-stride adaptation. The model's error on the last stride,
 measured apex minus the model's prediction for the inputs applied, is averaged (gain
@@ -33,6 +39,14 @@ import numpy as np
 
 from hopper_ros.physics.params import ModelParams
 from hopper_ros.physics.predictors import PREDICTORS, predict_stride
+
+NEWTON_ITERATIONS = 6
+HEIGHT_TOLERANCE = 5e-4     # [m] stage 1 stops when the AAS apex is this close ...
+ENERGY_TOLERANCE = 5e-3     # [J] ... and the apex energy this close (stage 2 refines)
+ANGLE_STEP = 1e-3           # [rad] finite-difference steps of the Jacobian
+TORQUE_STEP = 0.05          # [N m]
+MAX_ANGLE_STEP = 0.1        # [rad] Newton step limits
+MAX_TORQUE_STEP = 3.0       # [N m]
 
 
 @dataclass(frozen=True)
@@ -84,7 +98,8 @@ class StrideDecision:
     target_speed: float
     model_apex_height: float = math.nan   # [m] the model alone, for the adaptation
     model_forward_speed: float = math.nan
-    compute_time: float = 0.0        # [s] wall time of the decision
+    compute_time: float = 0.0        # [s] wall time of this decision (stage 1 or stage 2)
+    first_compute_time: float = math.nan   # [s] for a refined decision: stage 1's time
     bias: tuple[float, float] = field(default=(0.0, 0.0))
 
 
@@ -98,6 +113,8 @@ class DeadbeatController:
         self.bias_speed = 0.0
         self._warm_angle: float | None = None
         self._warm_torque = self.settings.initial_torque
+        self._defect = (0.0, 0.0)        # corrected minus AAS next apex at the last refined inputs
+        self._jacobian = None            # stage 1's Jacobian, d(z', E')/d(theta, tau_0)
         self._pending: StrideDecision | None = None
 
     def reset_adaptation(self) -> None:
@@ -113,19 +130,120 @@ class DeadbeatController:
     # ------------------------------------------------------------------ decision
     def decide(self, apex_height: float, forward_speed: float, target_height: float, target_speed: float,
                stride_index: int = 0) -> StrideDecision:
+        """Both stages: the fast decision, then its refinement (what the stride should use)."""
+        first = self.first_decision(apex_height, forward_speed, target_height, target_speed, stride_index)
+        return self.refine(first, apex_height, forward_speed)
+
+    def first_decision(self, apex_height: float, forward_speed: float, target_height: float, target_speed: float,
+                       stride_index: int = 0) -> StrideDecision:
+        """Stage 1, within the 1 ms loop: (5.1)-(5.6) on the thesis's AAS (scalar closed forms,
+        Newton with a finite-difference Jacobian from the last stride's inputs), aimed at the
+        setpoint minus the learned bias minus the corrected predictor's last known defect."""
         started = time.perf_counter()
-        s, p = self.settings, self.params
+        s = self.settings
         bias = (self.bias_height, self.bias_speed) if s.adaptation else (0.0, 0.0)
-        aim_height, aim_speed = target_height - bias[0], target_speed - bias[1]   # what the model must predict
-        center = self._warm_angle if self._warm_angle is not None else self.neutral_angle(forward_speed)
-        decision = self._solve(apex_height, forward_speed, aim_height, aim_speed, center, self._warm_torque)
-        if decision is not None and (decision[-1] == "outside" or abs(decision[0] - self._warm_torque) > 1.5 * s.torque_step):
-            # the solution left the grid (angle) or its linear range (torque): once more around it
-            decision = self._solve(apex_height, forward_speed, aim_height, aim_speed, decision[1], decision[0])
-        result = self._decision(stride_index, decision, target_height, target_speed, bias, forward_speed)
+        aim_height = target_height - bias[0] - self._defect[0]
+        aim_speed = target_speed - bias[1] - self._defect[1]
+        angle = self._warm_angle if self._warm_angle is not None else self.neutral_angle(forward_speed)
+        solved = self._newton(apex_height, forward_speed, aim_height, aim_speed, angle, self._warm_torque)
+        result = self._decision(stride_index, solved, target_height, target_speed, bias, forward_speed)
+        if result.feasible:   # what the model (not the AAS) predicts is only known after stage 2
+            result.predicted_apex_height, result.predicted_forward_speed = target_height, target_speed
         result.compute_time = time.perf_counter() - started
         self._pending = result if result.feasible else None
         return result
+
+    def refine(self, first: StrideDecision, apex_height: float, forward_speed: float) -> StrideDecision:
+        """Stage 2, during the flight (~1 ms): the inversion on the configured predictor (corrected
+        AAS by default), one batched call around stage 1's inputs; also updates the defect that
+        stage 1 uses next time."""
+        if not first.feasible or self.settings.predictor == "aas":
+            return first
+        started = time.perf_counter()
+        bias = first.bias
+        aim_height, aim_speed = first.target_height - bias[0], first.target_speed - bias[1]
+        solved = self._solve(apex_height, forward_speed, aim_height, aim_speed, first.touchdown_angle, first.tau_0)
+        if solved is not None and (solved[-1] == "outside" or abs(solved[0] - first.tau_0) > 1.5 * self.settings.torque_step):
+            # the solution left the grid (angle) or its linear range (torque): once more around it
+            solved = self._solve(apex_height, forward_speed, aim_height, aim_speed, solved[1], solved[0])
+        if solved is None:
+            return first
+        result = self._decision(first.stride_index, solved, first.target_height, first.target_speed, bias, forward_speed)
+        seed = predict_stride(self.params, apex_height, forward_speed, result.touchdown_angle, result.tau_0,
+                              result.ramp_duration, method="aas")
+        if seed.ok:
+            self._defect = (result.model_apex_height - seed.next_apex_height,
+                            result.model_forward_speed - seed.next_forward_speed)
+        result.first_compute_time = first.compute_time
+        result.compute_time = time.perf_counter() - started
+        self._pending = result
+        return result
+
+    def _newton(self, apex_height, forward_speed, aim_height, aim_speed, angle, torque):
+        """Stage 1's solve of z'(theta, tau_0) = z*, E'(theta, tau_0) = E* on the scalar AAS."""
+        s, p = self.settings, self.params
+        m, g = p.body_mass, p.gravity
+        target_energy = m * (0.5 * aim_speed ** 2 + g * aim_height)
+
+        def residual(theta, tau):
+            r = predict_stride(p, apex_height, forward_speed, theta, tau, method="aas")
+            if not r.ok:
+                return None
+            energy = m * (0.5 * r.next_forward_speed ** 2 + g * r.next_apex_height)
+            return r.next_apex_height - aim_height, energy - target_energy, r
+
+        def jacobian(theta, tau, at):
+            d_angle = residual(theta + ANGLE_STEP, tau)
+            d_torque = residual(theta, tau + TORQUE_STEP)
+            if d_angle is None or d_torque is None:
+                return None
+            return [[(d_angle[0] - at[0]) / ANGLE_STEP, (d_torque[0] - at[0]) / TORQUE_STEP],
+                    [(d_angle[1] - at[1]) / ANGLE_STEP, (d_torque[1] - at[1]) / TORQUE_STEP]]
+
+        status = ""
+        at = residual(angle, torque)
+        # the last stride's Jacobian, kept up to date by Broyden's rule: ~2 predictions per apex
+        J = self._jacobian
+        for _ in range(NEWTON_ITERATIONS):
+            if at is None:
+                angle = 0.5 * (angle + self.neutral_angle(forward_speed))   # back towards a safe stride
+                at, J = residual(angle, torque), None
+                continue
+            if abs(at[0]) < HEIGHT_TOLERANCE and abs(at[1]) < ENERGY_TOLERANCE:
+                break
+            if J is None:
+                J = jacobian(angle, torque, at)
+                if J is None:
+                    return None
+            (a, b), (c, d) = J
+            det = a * d - b * c
+            if det == 0.0:
+                J = None
+                continue
+            step_angle = -max(-MAX_ANGLE_STEP, min(MAX_ANGLE_STEP, (d * at[0] - b * at[1]) / det))
+            wanted = torque - max(-MAX_TORQUE_STEP, min(MAX_TORQUE_STEP, (a * at[1] - c * at[0]) / det))
+            new_torque = max(s.min_torque, min(s.max_torque, wanted))
+            if new_torque != wanted and a != 0.0:   # at the limit: keep the height (5.6), give up on the energy
+                status = "torque limit"
+                step_angle = -(at[0] + b * (new_torque - torque)) / a
+            new_angle = max(s.min_angle, min(s.max_angle, angle + step_angle))
+            step = (new_angle - angle, new_torque - torque)
+            after = residual(new_angle, new_torque)
+            if after is not None and (step[0] or step[1]):                       # Broyden's update
+                norm = step[0] ** 2 + step[1] ** 2
+                for row in (0, 1):
+                    miss = after[row] - at[row] - (J[row][0] * step[0] + J[row][1] * step[1])
+                    J[row] = [J[row][0] + miss * step[0] / norm, J[row][1] + miss * step[1] / norm]
+            angle, torque, at = new_angle, new_torque, after
+            if status and at is not None and abs(at[0]) < HEIGHT_TOLERANCE:
+                break
+        self._jacobian = J
+        if at is None:
+            return None
+        r = at[2]
+        if abs(at[0]) > 10 * HEIGHT_TOLERANCE and not status:
+            status = "height out of reach"
+        return (torque, angle, r.ramp_duration, r.next_apex_height, r.next_forward_speed, r.stride_time, status)
 
     def _solve(self, apex_height, forward_speed, aim_height, aim_speed, center, warm_torque):
         """One batched predictor call; (tau_0, theta, t_f, z, v, stride_time, status) or None."""

@@ -29,7 +29,8 @@ class StrideRecord:
     tau_0: float
     touchdown_angle: float
     feasible: bool
-    decision_time: float     # [s]
+    decision_time: float     # [s] stage 1 (the fast decision within the 1 ms loop)
+    refine_time: float       # [s] stage 2 (the refinement during the flight)
 
 
 def run_closed_loop(controller: DeadbeatController, sim_config, hardware: Mapping[str, Any],
@@ -49,13 +50,19 @@ def run_closed_loop(controller: DeadbeatController, sim_config, hardware: Mappin
         apex = experiment.next_apex
         if experiment.fell or apex is None:
             records.append(StrideRecord(index, target_height, target_speed, math.nan, math.nan, decision.tau_0,
-                                        decision.touchdown_angle, decision.feasible, decision.compute_time))
+                                        decision.touchdown_angle, decision.feasible, *_times(decision)))
             break
         apex_height, forward_speed = apex.z, apex.ydot
         controller.observe(apex_height, forward_speed)
         records.append(StrideRecord(index, target_height, target_speed, apex_height, forward_speed, decision.tau_0,
-                                    decision.touchdown_angle, decision.feasible, decision.compute_time))
+                                    decision.touchdown_angle, decision.feasible, *_times(decision)))
     return records
+
+
+def _times(decision) -> tuple[float, float]:
+    if math.isnan(decision.first_compute_time):        # not refined: stage 1 only
+        return decision.compute_time, 0.0
+    return decision.first_compute_time, decision.compute_time
 
 
 @dataclass(frozen=True)
