@@ -83,6 +83,13 @@ class StrideMachine:
         self.hold_angle = plan.touchdown_angle
         self.phase = Phase.POSITIONING
 
+    def revise(self, plan: StridePlan) -> None:
+        """A better plan for the same stride (the controller's stage 2), taken before touchdown."""
+        if self.phase in (Phase.POSITIONING, Phase.PRE_TOUCHDOWN, Phase.SAFE) and not self.single_stride:
+            self.plan, self.hold_angle, self.reason = plan, plan.touchdown_angle, ""
+            if self.phase is Phase.SAFE:
+                self.phase = Phase.POSITIONING
+
     def on_pre_touchdown(self) -> None:
         if self.phase is Phase.POSITIONING:
             self.phase = Phase.PRE_TOUCHDOWN

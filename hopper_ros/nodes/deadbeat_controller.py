@@ -104,18 +104,25 @@ class DeadbeatControllerNode(Node):
         self.controller.observe(msg.apex_height, msg.forward_speed)
         if self.setpoint is None:
             return
-        decision = self.controller.decide(msg.apex_height, msg.forward_speed, *self.setpoint, msg.stride_index)
+        first = self.controller.first_decision(msg.apex_height, msg.forward_speed, *self.setpoint, msg.stride_index)
+        self._take(first)                                   # the leg starts moving now
+        decision = self.controller.refine(first, msg.apex_height, msg.forward_speed)
+        if decision is not first and decision.feasible:     # the stride's inputs, ~1 ms later
+            self.machine.revise(StridePlan(decision.tau_0, decision.touchdown_angle, decision.ramp_duration))
         self.last_decision = decision
         self.counters["strides"] += 1
+        if not decision.feasible:
+            self.counters["infeasible"] += 1
+            self.get_logger().warning(f"stride {msg.stride_index}: infeasible ({decision.reason}); leg held, no torque")
+        self._publish_decision(decision)
+
+    def _take(self, decision: StrideDecision) -> None:
         if decision.feasible:
             self.machine.on_apex(StridePlan(decision.tau_0, decision.touchdown_angle, decision.ramp_duration),
                                  decision.reason)
         else:
-            self.counters["infeasible"] += 1
             self.machine.on_apex(None, decision.reason)
             self.machine.hold_angle = decision.touchdown_angle
-            self.get_logger().warning(f"stride {msg.stride_index}: infeasible ({decision.reason}); leg held, no torque")
-        self._publish_decision(decision)
 
     def _single_stride_apex(self, msg: ApexState) -> None:
         if self.machine.phase is Phase.INITIALISE:
@@ -181,8 +188,9 @@ class DeadbeatControllerNode(Node):
         msg.counter_names = list(self.counters)
         msg.counter_values = [int(v) for v in self.counters.values()]
         decision = self.last_decision
-        msg.value_names = ["bias_height_m", "bias_speed_m_s", "decision_time_s"]
+        msg.value_names = ["bias_height_m", "bias_speed_m_s", "decision_time_s", "refine_time_s"]
         msg.values = [self.controller.bias_height, self.controller.bias_speed,
+                      decision.first_compute_time if decision else math.nan,
                       decision.compute_time if decision else math.nan]
         msg.level = NodeDiagnostics.WARN if self.machine.phase is Phase.SAFE else NodeDiagnostics.OK
         msg.message = self.machine.reason if self.machine.phase is Phase.SAFE else ""
