@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import logging
 import math
+import socket
 import struct
 import time
 from dataclasses import dataclass, fields
@@ -164,7 +165,24 @@ def load_section(name: str = "motor_driver.yaml") -> dict[str, Any]:
     return dict(section)
 
 
-def open_bus(can_config: Mapping[str, Any], **overrides: Any) -> can.BusABC:
+CONNECT_TIMEOUT = 30.0   # [s] for a socketcand server to accept (the simulated robot may start later)
+
+
+def wait_for_server(host: str, port: int, timeout: float, cancelled: Callable[[], bool] = lambda: False) -> None:
+    """Wait until a TCP server accepts on host:port (python-can's own retry spins a core for 10 s)."""
+    end = time.monotonic() + timeout
+    while not cancelled():
+        try:
+            socket.create_connection((host, port), timeout=1.0).close()
+            return
+        except OSError as exc:
+            if time.monotonic() > end:
+                raise OSError(f"no CAN server (socketcand) accepts on {host}:{port} after {timeout:.0f} s: {exc}") from None
+            time.sleep(0.1)
+    raise InterruptedError(f"stopped while waiting for the CAN server on {host}:{port}")
+
+
+def open_bus(can_config: Mapping[str, Any], cancelled: Callable[[], bool] = lambda: False, **overrides: Any) -> can.BusABC:
     """A python-can bus from the `can:` section of hardware.yaml (values in `overrides` win).
 
     socketcan (robot: can0), socketcand (the simulated robot's loopback hub: host, port), virtual
@@ -179,7 +197,9 @@ def open_bus(can_config: Mapping[str, Any], **overrides: Any) -> can.BusABC:
     if interface == "socketcand":
         # python-can warns on every frame split across two TCP reads, a normal event: not ours to log
         logging.getLogger("can.interfaces.socketcand").setLevel(logging.ERROR)
-        return can.Bus(interface=interface, channel=channel, host=str(cfg["host"]), port=int(cfg["port"]), tcp_tune=True)
+        host, port = str(cfg["host"]), int(cfg["port"])
+        wait_for_server(host, port, float(cfg.get("connect_timeout", CONNECT_TIMEOUT)), cancelled)
+        return can.Bus(interface=interface, channel=channel, host=host, port=port, tcp_tune=True)
     if interface in ("socketcan", "virtual"):
         return can.Bus(interface=interface, channel=channel)
     if not interface:

@@ -107,6 +107,14 @@ class StopSignals:
             self._pipe = None
 
 
+_ACTIVE_STOP: StopSignals | None = None
+
+
+def stop_requested() -> bool:
+    """True once SIGINT/SIGTERM arrived: for a node whose start-up waits (e.g. for a server)."""
+    return _ACTIVE_STOP is not None and _ACTIVE_STOP.received is not None
+
+
 def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] | None = None) -> int:  # noqa: F821
     """Run one node until SIGINT/SIGTERM; returns the process exit status (0: clean stop)."""
     try:
@@ -115,7 +123,8 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
-    stop = StopSignals().install()  # before rclpy: a signal during start-up is not lost either
+    global _ACTIVE_STOP
+    stop = _ACTIVE_STOP = StopSignals().install()  # before rclpy: a signal during start-up is not lost either
 
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor

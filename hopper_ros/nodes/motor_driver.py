@@ -42,7 +42,7 @@ from hopper_ros.motor_driver import (
     open_bus,
 )
 from hopper_ros.msg import MotorCommand, MotorStatus, NodeDiagnostics
-from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.common import run_node, stop_requested
 
 #: commands: the latest one matters (a stale one is worse than none); matches reliable publishers too
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -92,7 +92,7 @@ class MotorDriverNode(Node):
         # while a callback runs (the default switch interval is 5 ms).
         sys.setswitchinterval(min(sys.getswitchinterval(), settings.sync_period / 4))
         self._lock = threading.Lock()
-        self._bus = open_bus(hardware.get("can", {}), **bus_overrides)
+        self._bus = open_bus(hardware.get("can", {}), cancelled=stop_requested, **bus_overrides)
         try:
             self._driver = MotorDriver(self._bus, hardware, settings)
         except Exception:
