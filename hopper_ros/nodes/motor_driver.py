@@ -214,8 +214,7 @@ class MotorDriverNode(Node):
         with self._lock:
             confirmed = self._driver.shutdown()
             events = self._driver.drain_events()
-        for level, text in events:
-            (self.get_logger().error if level == ERROR else self.get_logger().info)(text)
+        self._log(events)
         if confirmed:
             self.get_logger().info("drive disabled (confirmed by the drive)")
         else:
