@@ -76,6 +76,8 @@ def test_two_hundred_strides_without_a_fall():
 def test_stride_machine_runs_fig_5_3():
     machine = StrideMachine()
     assert machine.command(0.0) == (MODE_DISABLED, 0.0)
+    machine.hold(0.35)                                          # a setpoint: ready for the throw
+    assert machine.phase is Phase.INITIALISE and machine.command(0.01) == (MODE_POSITION, 0.35)
     machine.on_apex(StridePlan(tau_0=6.0, touchdown_angle=0.4, ramp_duration=0.1))
     assert machine.command(0.05) == (MODE_POSITION, 0.4)
     machine.on_touchdown(1.0)                                   # missed pre-touchdown: still a stance
@@ -108,3 +110,4 @@ def test_bad_settings_name_the_problem():
         DeadbeatSettings.from_mapping({"gain": 1.0})
     with pytest.raises(ValueError, match="predictor 'magic'"):
         DeadbeatSettings.from_mapping({"predictor": "magic"})
+

@@ -53,8 +53,10 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         assert spin_until(executor, lambda: apex.get_subscription_count() and states.get_subscription_count()
                           and events.get_subscription_count() and setpoint.get_subscription_count()
                           and node.count_publishers("motor_command"))
+        assert tick(9.9).mode == MotorCommand.MODE_DISABLED              # nothing to do without a setpoint
         setpoint.publish(ApexState(apex_height=0.39, forward_speed=2.0))
-        assert tick(10.0).mode == MotorCommand.MODE_DISABLED             # nothing to do before an apex
+        spin_until(executor, lambda: False, timeout=0.3)
+        assert tick(10.0).mode == MotorCommand.MODE_POSITION             # leg held, ready for the throw
         apex.publish(ApexState(stride_index=3, apex_height=0.39, forward_speed=2.0))
         assert spin_until(executor, lambda: strides)
         decision = strides[-1]

@@ -20,6 +20,7 @@ COMMANDS = {
     "topic": "hopper_ros.cli.topic",
     "launch": "hopper_ros.cli.launch",
     "predictors": "hopper_ros.cli.predictors",
+    "demo": "hopper_ros.cli.demo",
 }
 
 

@@ -28,7 +28,7 @@ MODE_DISABLED, MODE_CURRENT, MODE_POSITION = 0, 1, 2
 
 class Phase(Enum):
     IDLE = "idle"                   # nothing commanded yet (no setpoint or no apex)
-    INITIALISE = "initialise"       # single stride: leg held at theta_td, waiting for the apex
+    INITIALISE = "initialise"       # leg held (single stride: at theta_td), waiting for the first apex
     POSITIONING = "positioning"
     PRE_TOUCHDOWN = "pre-touchdown"
     STANCE = "stance"
@@ -59,6 +59,12 @@ class StrideMachine:
         self.reason = ""
 
     # ------------------------------------------------------------------ inputs
+    def hold(self, angle: float) -> None:
+        """Before the first apex of a closed-loop run: hold the leg (the robot is about to be thrown)."""
+        if self.phase in (Phase.IDLE, Phase.INITIALISE) and not self.single_stride:
+            self.hold_angle = angle
+            self.phase = Phase.INITIALISE
+
     def start_single_stride(self, plan: StridePlan) -> None:
         """Fig 4.1's first phase: hold theta_td and wait for the robot to be thrown to an apex."""
         self.single_stride = True

@@ -7,7 +7,8 @@ setpoint_scheduler), publishes the decision on `stride_command` (StrideCommand),
 hip through the stride (hopper_ros.control.stride_machine): leg to theta_td (position), zero
 current 2 cm above touchdown, the ramp from touchdown (current), the lift-off angle held after
 lift-off. An infeasible stride holds the leg and applies no torque, and the command says why.
-A drive fault (motor_status) also ends in that safe state until the next apex.
+A drive problem (the motor driver's ERROR diagnostics) also ends in that safe state until the
+next apex.
 
 Single stride (`experiment:=single_stride`, with `tau_0` and `touchdown_angle`): Fig 4.1 for
 data collection; the ramp ends at the model's predicted lift-off for the apex the robot is
@@ -32,7 +33,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from hopper_ros.config import load_yaml
 from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings, StrideDecision
 from hopper_ros.control.stride_machine import Phase, StrideMachine, StridePlan
-from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorCommand, MotorStatus, NodeDiagnostics, StrideCommand
+from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorCommand, NodeDiagnostics, StrideCommand
 from hopper_ros.nodes.common import run_node
 from hopper_ros.physics.params import load_params
 from hopper_ros.physics.predictors import predict_stride
@@ -40,7 +41,6 @@ from hopper_ros.physics.predictors import predict_stride
 SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-FAULT_STATES = (MotorStatus.STATE_FAULT, MotorStatus.STATE_FAULT_REACTION_ACTIVE)
 
 
 def _seconds(stamp) -> float:
@@ -85,7 +85,7 @@ class DeadbeatControllerNode(Node):
         self.create_subscription(ApexState, "apex", self._on_apex, 10)
         self.create_subscription(GaitEvent, "gait_event", self._on_event, 10)
         self.create_subscription(BodyState, "body_state", self._on_state, COMMAND_QOS)
-        self.create_subscription(MotorStatus, "motor_status", self._on_motor_status, COMMAND_QOS)
+        self.create_subscription(NodeDiagnostics, "diagnostics", self._on_diagnostics, 10)
         self.create_timer(1.0, self._report)
         self._command = MotorCommand()
         s = self.controller.settings
@@ -95,6 +95,8 @@ class DeadbeatControllerNode(Node):
     # ------------------------------------------------------------------ inputs
     def _on_setpoint(self, msg: ApexState) -> None:
         self.setpoint = (msg.apex_height, msg.forward_speed)
+        if self.experiment == "closed_loop":      # ready for the throw: the leg at the neutral angle
+            self.machine.hold(self.controller.neutral_angle(msg.forward_speed))
         self.get_logger().info(f"setpoint: apex {msg.apex_height:.3f} m at {msg.forward_speed:.2f} m/s")
 
     def _on_apex(self, msg: ApexState) -> None:
@@ -147,10 +149,12 @@ class DeadbeatControllerNode(Node):
         elif msg.type == GaitEvent.LIFTOFF:
             self.machine.on_liftoff(msg.state.leg_angle)
 
-    def _on_motor_status(self, msg: MotorStatus) -> None:
-        if msg.state in FAULT_STATES and self.machine.phase is not Phase.SAFE:
+    def _on_diagnostics(self, msg: NodeDiagnostics) -> None:
+        """The motor driver reports a drive fault or a lost drive at once: hold the leg, no torque."""
+        if (msg.node_name.endswith("motor_driver") and msg.level == NodeDiagnostics.ERROR
+                and self.machine.phase is not Phase.SAFE):
             self.counters["faults"] += 1
-            self.machine.fault(f"drive fault 0x{msg.fault_code:04X}: {msg.fault_text}")
+            self.machine.fault(f"motor driver: {msg.message}")
             self.get_logger().error(self.machine.reason)
 
     def _on_state(self, msg: BodyState) -> None:

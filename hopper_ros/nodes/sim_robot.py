@@ -20,6 +20,7 @@ Parameters (read only):
   udp_host, udp_port: override hardware.yaml's microcontroller destination
   enable_effects, disable_effects: effect names to switch on/off (see config/sim.yaml)
   apex_height, forward_speed, leg_angle: the initial throw (default: sim.yaml initial_apex)
+  publish_truth: publish sim/truth (default true; sim/events always)
   throw_lead: throws start this long before their apex, rising, so the apex is a natural one
       the sensing sees (default 0.05 s); hold: the robot is held at its first throw's start
       until the first `sim/throw` (as the researcher holds it until the graph is up)
@@ -99,6 +100,7 @@ class SimRobotNode(Node):
         self.duration = param("duration", 0.0, "simulated time to run [s], 0: until stopped")
         experiments = param("experiments", False, "run built-in single-stride experiments (can:=none)")
         hold = param("hold", False, "hold the robot at its first throw until sim/throw")
+        self.publish_truth = param("publish_truth", True, "publish sim/truth at 1 kHz")
         self.throw_lead = param("throw_lead", 0.05, "throws start this long before the apex [s]")
         if self.mode not in ("realtime", "lockstep"):
             raise ValueError(f"mode must be realtime or lockstep, got {self.mode!r}")
@@ -191,11 +193,12 @@ class SimRobotNode(Node):
         force.center_of_pressure = sample.force.center_of_pressure
         force.contact = sample.force.contact
         self._force.publish(force)
-        self._stamp(truth.t, state.header.stamp)
-        state.sequence = sample.packet.sequence
-        state.y, state.z, state.y_dot, state.z_dot = truth.y, truth.z, truth.ydot, truth.zdot
-        state.leg_angle, state.leg_angle_rate = truth.leg_angle, truth.leg_rate
-        self._truth.publish(state)
+        if self.publish_truth:
+            self._stamp(truth.t, state.header.stamp)
+            state.sequence = sample.packet.sequence
+            state.y, state.z, state.y_dot, state.z_dot = truth.y, truth.z, truth.ydot, truth.zdot
+            state.leg_angle, state.leg_angle_rate = truth.leg_angle, truth.leg_rate
+            self._truth.publish(state)
         for event in sample.events:
             if event.kind == "fall":
                 self.counters["falls"] += 1

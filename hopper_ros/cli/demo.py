@@ -1,0 +1,228 @@
+"""`hopper demo`: the closed-loop run of Fig 5.5 on the simulated robot, start to report.
+
+  hopper demo [--strides N] [-o DIR] [--launch FILE] [--timeout S]
+
+Starts the whole graph as separate processes with our launcher (`config/launch/demo.yaml`:
+simulated robot, encoder bridge, state estimator, event detector, deadbeat controller, motor
+driver, setpoint scheduler; their log goes to DIR/launch.log), waits until the graph is up (state
+estimates flowing, drive enabled, controller listening), throws the robot to the first setpoint's
+apex, follows it stride by stride (one progress line per apex), stops everything cleanly after N
+strides, then prints the per-stride table (apex height and speed against their setpoints) and
+writes DIR/strides.csv, DIR/fig5_5.png (Fig 5.5 style) and DIR/summary.md. Exit status 0 when the
+robot ran N strides without a fall and the graph stopped cleanly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from hopper_ros.config import config_path
+
+HELP = "run the closed-loop Fig 5.5 demo on the simulated robot and report it"
+DEFAULT_LAUNCH = "launch/demo.yaml"
+STARTUP_TIMEOUT = 60.0   # [s] until the graph is up
+STOP_TIMEOUT = 20.0      # [s] for the launcher to stop everything
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--strides", type=int, default=30, help="strides to run after the throw (default 30)")
+    parser.add_argument("-o", "--output", default="demo_out", help="output folder (default demo_out)")
+    parser.add_argument("--launch", default=DEFAULT_LAUNCH, help=f"launch file (default {DEFAULT_LAUNCH})")
+    parser.add_argument("--timeout", type=float, default=120.0, help="give up after S seconds of running (default 120)")
+
+
+@dataclass
+class StrideRow:
+    stride: int
+    time: float                 # [s] since the throw
+    target_height: float
+    target_speed: float
+    apex_height: float          # the apex that ends the stride
+    forward_speed: float
+    tau_0: float
+    touchdown_angle: float
+
+
+def main(args: argparse.Namespace) -> int:
+    out = Path(args.output).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    launch_file = config_path(args.launch)
+    log_path = out / "launch.log"
+    print(f"demo: starting the graph ({launch_file.name}); node logs in {log_path}", flush=True)
+    log = open(log_path, "w", encoding="utf-8")
+    launcher = subprocess.Popen([sys.executable, "-m", "hopper_ros.cli", "launch", str(launch_file)],
+                                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
+    rows: list[StrideRow] = []
+    problem = ""
+    try:
+        rows, problem = _follow(args, launcher)
+    except KeyboardInterrupt:
+        problem = "interrupted"
+    finally:
+        status = _stop(launcher)
+        log.close()
+    if status != 0 and not problem:
+        problem = f"the graph did not stop cleanly (launcher exit status {status}; see {log_path})"
+    _report(rows, out)
+    if problem:
+        print(f"demo: FAILED: {problem}", flush=True)
+        return 1
+    print(f"demo: done, {len(rows)} strides; results in {out}", flush=True)
+    return 0
+
+
+def _stop(launcher: subprocess.Popen) -> int:
+    if launcher.poll() is None:
+        print("demo: stopping the graph", flush=True)
+        os.killpg(launcher.pid, signal.SIGINT)
+    try:
+        return launcher.wait(STOP_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        os.killpg(launcher.pid, signal.SIGKILL)
+        launcher.wait()
+        return -9
+
+
+def _follow(args, launcher) -> tuple[list[StrideRow], str]:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rclpy.signals import SignalHandlerOptions
+
+    from hopper_ros.msg import ApexState, BodyState, MotorStatus, NodeDiagnostics, StrideCommand
+
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node("demo_monitor")
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    seen = {"state": 0, "enabled": False, "falls": 0, "setpoint": None, "commands": {}, "apexes": []}
+
+    def on_status(msg):
+        seen["enabled"] = msg.state == MotorStatus.STATE_OPERATION_ENABLED
+
+    def on_diagnostics(msg):
+        if msg.node_name.endswith("sim_robot") and "falls" in msg.counter_names:
+            seen["falls"] = msg.counter_values[list(msg.counter_names).index("falls")]
+
+    best_effort = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+    start_up = [node.create_subscription(BodyState, "body_state", lambda m: seen.__setitem__("state", seen["state"] + 1),
+                                         best_effort),
+                node.create_subscription(MotorStatus, "motor_status", on_status, best_effort)]
+    node.create_subscription(NodeDiagnostics, "diagnostics", on_diagnostics, 10)
+    node.create_subscription(ApexState, "apex_setpoint", lambda m: seen.__setitem__("setpoint", m), latched)
+    node.create_subscription(StrideCommand, "stride_command", lambda m: seen["commands"].__setitem__(m.stride_index, m), 10)
+    node.create_subscription(ApexState, "apex", seen["apexes"].append, 10)
+    throw = node.create_publisher(ApexState, "sim/throw", 10)
+    try:
+        started = time.monotonic()
+        print("demo: waiting for the graph (state estimates, drive enabled, controller, setpoint)", flush=True)
+        while not (seen["state"] > 100 and seen["enabled"] and seen["setpoint"] is not None
+                   and node.count_subscribers("apex") >= 2 and throw.get_subscription_count() >= 1):
+            if launcher.poll() is not None:
+                return [], "the graph stopped during start-up (see the log)"
+            if time.monotonic() - started > STARTUP_TIMEOUT:
+                return [], f"the graph did not come up within {STARTUP_TIMEOUT:.0f} s (see the log)"
+            executor.spin_once(timeout_sec=0.05)
+        for subscription in start_up:          # 1 kHz topics: not needed any more, spare the CPU
+            node.destroy_subscription(subscription)
+        setpoint = seen["setpoint"]
+        print(f"demo: graph up in {time.monotonic() - started:.1f} s; throwing the robot to apex "
+              f"{setpoint.apex_height:.2f} m at {setpoint.forward_speed:.2f} m/s", flush=True)
+        throw.publish(ApexState(apex_height=setpoint.apex_height, forward_speed=setpoint.forward_speed,
+                                leg_angle=_neutral_angle(setpoint.forward_speed)))
+        thrown = time.monotonic()
+        rows: list[StrideRow] = []
+        handled = 0
+        print(f"{'stride':>6} {'time s':>7} {'height m':>9} {'target':>7} {'speed m/s':>9} {'target':>7} "
+              f"{'tau_0 Nm':>8} {'theta_td':>8}", flush=True)
+        while len(rows) < args.strides:
+            executor.spin_once(timeout_sec=0.05)
+            if seen["falls"]:
+                return rows, "the robot fell"
+            if launcher.poll() is not None:
+                return rows, "a node of the graph stopped (see the log)"
+            if time.monotonic() - thrown > args.timeout:
+                return rows, f"only {len(rows)} strides in {args.timeout:.0f} s"
+            apexes = seen["apexes"]
+            while handled + 1 < len(apexes):
+                opening, closing = apexes[handled], apexes[handled + 1]
+                handled += 1
+                command = seen["commands"].get(opening.stride_index)
+                if command is None:
+                    continue              # the first apex after the throw opens the first stride
+                row = StrideRow(len(rows) + 1, time.monotonic() - thrown, command.target_apex_height,
+                                command.target_forward_speed, closing.apex_height, closing.forward_speed,
+                                command.tau_0, command.touchdown_angle)
+                rows.append(row)
+                print(f"{row.stride:6d} {row.time:7.2f} {row.apex_height:9.4f} {row.target_height:7.3f} "
+                      f"{row.forward_speed:9.3f} {row.target_speed:7.2f} {row.tau_0:8.2f} "
+                      f"{math.degrees(row.touchdown_angle):7.1f}d", flush=True)
+        return rows, ""
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def _neutral_angle(forward_speed: float) -> float:
+    from hopper_ros.control.deadbeat import DeadbeatController
+    from hopper_ros.physics.params import load_params
+
+    return DeadbeatController(load_params()).neutral_angle(forward_speed)
+
+
+def _report(rows: list[StrideRow], out: Path) -> None:
+    with open(out / "strides.csv", "w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["stride", "time_s", "target_height_m", "target_speed_m_s", "apex_height_m",
+                         "forward_speed_m_s", "tau_0_N_m", "touchdown_angle_rad"])
+        for r in rows:
+            writer.writerow([r.stride, f"{r.time:.3f}", r.target_height, r.target_speed, f"{r.apex_height:.5f}",
+                             f"{r.forward_speed:.5f}", f"{r.tau_0:.4f}", f"{r.touchdown_angle:.5f}"])
+    if not rows:
+        return
+    lines = ["| stride | apex height [m] | setpoint | error [cm] | speed [m/s] | setpoint | error [m/s] | tau_0 [N m] | theta_td [deg] |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r.stride} | {r.apex_height:.4f} | {r.target_height:.2f} | {100 * (r.apex_height - r.target_height):+.2f} "
+                     f"| {r.forward_speed:.3f} | {r.target_speed:.2f} | {r.forward_speed - r.target_speed:+.3f} "
+                     f"| {r.tau_0:.2f} | {math.degrees(r.touchdown_angle):.1f} |")
+    table = "\n".join(lines)
+    print("\n" + table, flush=True)
+    (out / "summary.md").write_text("# Closed-loop demo (Fig 5.5 schedule)\n\n" + table + "\n\n![Fig 5.5](fig5_5.png)\n",
+                                    encoding="utf-8")
+    _plot(rows, out / "fig5_5.png")
+    print(f"\ndemo: plot {out / 'fig5_5.png'}", flush=True)
+
+
+def _plot(rows: list[StrideRow], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    strides = [r.stride for r in rows]
+    figure, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    top.plot(strides, [r.apex_height for r in rows], "o-", label="apex height")
+    top.step(strides, [r.target_height for r in rows], "k--", where="mid", label="setpoint")
+    top.set_ylabel("apex height [m]")
+    top.legend()
+    bottom.plot(strides, [r.forward_speed for r in rows], "o-", color="tab:red", label="forward speed")
+    bottom.step(strides, [r.target_speed for r in rows], "k--", where="mid", label="setpoint")
+    bottom.set_ylabel("apex speed [m/s]")
+    bottom.set_xlabel("stride")
+    bottom.legend()
+    top.set_title("Deadbeat controller on the simulated robot (Fig 5.5 schedule)")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
