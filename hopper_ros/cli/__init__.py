@@ -21,6 +21,10 @@ COMMANDS = {
     "launch": "hopper_ros.cli.launch",
     "predictors": "hopper_ros.cli.predictors",
     "demo": "hopper_ros.cli.demo",
+    "bag": "hopper_ros.cli.bag",
+    "collect": "hopper_ros.cli.collect",
+    "identify": "hopper_ros.cli.identify",
+    "report": "hopper_ros.cli.report",
 }
 
 

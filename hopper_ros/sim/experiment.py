@@ -51,12 +51,17 @@ class StrideExperiment:
         return self.stage is Stage.DONE
 
     def current_demand(self, t: float) -> float:
-        """Motor current for the coming period [A] (the regulator's; zero from pre-touchdown to lift-off)."""
+        """Motor current for the coming period [A]: the regulator's in flight, zero from pre-touchdown,
+        the ramp's in stance."""
         plant = self.robot.plant
         if self.stage is Stage.HOLD and plant.toe_height < self.pre_touchdown_height:
             self.stage = Stage.PRE_TOUCHDOWN
-        if self.stage in (Stage.PRE_TOUCHDOWN, Stage.STANCE):
+        if self.stage is Stage.PRE_TOUCHDOWN:
             return 0.0
+        if self.stage is Stage.STANCE:   # what the current sensor reads; the plant gets the ramp in continuous time
+            since = t - plant.touchdown_time
+            ramp = -self.tau_0 * (1.0 - since / self.ramp_duration) if 0.0 <= since < self.ramp_duration else 0.0
+            return self.robot.motor.current(ramp)
         motor = self.robot.motor
         return self.regulator.current(self.hold_angle, plant.leg_angle, plant.leg_rate, self.robot.period, motor)
 

@@ -1,0 +1,138 @@
+"""`hopper bag record|info|recover`: rosbag2 bags (MCAP) of live topics (like `ros2 bag`).
+
+  hopper bag record (-a | TOPIC ...) -o DIR [--duration S] [--chunk-size B] [--chunk-interval S]
+  hopper bag info DIR
+  hopper bag recover DIR
+
+`record` runs until Ctrl-C (SIGINT) or SIGTERM, then finishes the MCAP and writes
+metadata.yaml (exit 0). Killed harder, the bag keeps every closed chunk; `info` reads it and
+says it is unfinished, `recover` makes it complete. Format: hopper_ros/recording/bag.py.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+HELP = "record topics into a rosbag2 bag (MCAP), show a bag, recover an interrupted one (like `ros2 bag`)"
+
+_POLL_PERIOD = 0.25   # [s] between looks at the graph for new topics
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from hopper_ros.recording.bag import DEFAULT_CHUNK_INTERVAL, DEFAULT_CHUNK_SIZE
+
+    verbs = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
+    record = verbs.add_parser("record", help="record topics of the running graph into a new bag folder")
+    record.add_argument("topics", nargs="*", metavar="TOPIC", help="topics to record")
+    record.add_argument("-a", "--all", action="store_true", help="record every topic (hidden ones with --include-hidden-topics)")
+    record.add_argument("--include-hidden-topics", action="store_true")
+    record.add_argument("-o", "--output", required=True, metavar="DIR", help="new bag folder (must not exist or be empty)")
+    record.add_argument("-d", "--duration", type=float, metavar="S", help="stop after S seconds")
+    record.add_argument("--chunk-size", type=int, default=DEFAULT_CHUNK_SIZE, metavar="BYTES",
+                        help=f"uncompressed chunk size (default {DEFAULT_CHUNK_SIZE})")
+    record.add_argument("--chunk-interval", type=float, default=DEFAULT_CHUNK_INTERVAL, metavar="S",
+                        help=f"close a chunk at least every S seconds: at most this much is lost if the "
+                             f"recorder is killed (default {DEFAULT_CHUNK_INTERVAL:g})")
+    record.add_argument("--compression", choices=("zstd", "none"), default="zstd", help="chunk compression")
+    record.set_defaults(_verb=_record)
+    info = verbs.add_parser("info", help="topics, counts, duration and state of a bag (also an unfinished one)")
+    info.add_argument("bag", help="bag folder or .mcap file")
+    info.set_defaults(_verb=_info)
+    recover = verbs.add_parser("recover", help="complete a bag whose recorder was killed (keeps the original file)")
+    recover.add_argument("bag", help="bag folder")
+    recover.set_defaults(_verb=_recover)
+
+
+def main(args: argparse.Namespace) -> int:
+    return args._verb(args)
+
+
+def _info(args) -> int:
+    from hopper_ros.recording.bag import BagError, bag_info
+
+    try:
+        print(bag_info(args.bag).format())
+    except (BagError, OSError) as exc:
+        print(f"hopper bag info: error: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _recover(args) -> int:
+    from hopper_ros.recording.bag import BagError, recover_bag
+
+    try:
+        result = recover_bag(args.bag)
+    except (BagError, OSError) as exc:
+        print(f"hopper bag recover: error: {exc}", file=sys.stderr)
+        return 1
+    if result.already_complete:
+        print(f"{result.path}: complete already ({result.messages} messages), nothing to do")
+    else:
+        kept = f"; the unfinished file is kept as {result.kept_original}" if result.kept_original else ""
+        print(f"{result.path}: recovered {result.messages} messages ({result.dropped_bytes} bytes of an "
+              f"unfinished chunk dropped: {result.problem}){kept}")
+    return 0
+
+
+def _record(args) -> int:
+    from hopper_ros.nodes.common import StopSignals
+    from hopper_ros.recording.bag import BagError, BagWriter
+
+    if bool(args.all) == bool(args.topics):
+        print("hopper bag record: error: give either -a or one or more topics", file=sys.stderr)
+        return 2
+    try:
+        bag = BagWriter(args.output, chunk_size=args.chunk_size, chunk_interval=args.chunk_interval,
+                        compression=args.compression)
+    except (BagError, OSError) as exc:
+        print(f"hopper bag record: error: {exc}", file=sys.stderr)
+        return 2
+    stop = StopSignals().install()
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from hopper_ros.recording.recorder import Recorder
+
+    def log(text: str) -> None:
+        print(text, file=sys.stderr, flush=True)
+
+    node = None
+    status = 0
+    try:
+        rclpy.init(args=["hopper"], signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node(f"_hopper_bag_record_{os.getpid()}", start_parameter_services=False)
+        stop.attach(node)
+        recorder = Recorder(node, bag, None if args.all else args.topics,
+                            include_hidden=args.include_hidden_topics, log=log)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        log(f"recording to {bag.path} ({'all topics' if args.all else ', '.join(recorder.wanted)}); Ctrl-C stops")
+        end = None if args.duration is None else time.monotonic() + args.duration
+        next_look = 0.0
+        while stop.received is None and (end is None or time.monotonic() < end):
+            if time.monotonic() >= next_look:
+                recorder.discover()
+                next_look = time.monotonic() + _POLL_PERIOD
+            executor.spin_once(timeout_sec=_POLL_PERIOD)
+        executor.shutdown(timeout_sec=1.0)
+    except Exception as exc:  # noqa: BLE001 - close the bag whatever happened, then report
+        log(f"hopper bag record: error: {exc}")
+        status = 1
+    finally:
+        stop.detach()
+        try:
+            bag.close()
+            log(f"bag {bag.path} closed: {bag.message_count} messages on {len(bag.topics)} topic(s)")
+        except Exception as exc:  # noqa: BLE001
+            log(f"hopper bag record: error closing {bag.path}: {exc} (run `hopper bag recover {bag.path}`)")
+            status = 1
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        stop.uninstall()
+    return status

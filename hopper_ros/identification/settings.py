@@ -1,0 +1,145 @@
+"""Identification settings (config/identification.yaml), validated with errors naming the key."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, fields, replace
+from typing import Any, Mapping
+
+from hopper_ros.config import load_yaml
+from hopper_ros.physics.params import ModelParams
+from hopper_ros.physics.predictors import PREDICTORS
+
+from .strides import ExtractionSettings
+
+DEFAULT_FILE = "identification.yaml"
+PARAMETERS = tuple(f.name for f in fields(ModelParams))
+FITTABLE = tuple(name for name in PARAMETERS if name != "rest_length")
+
+
+@dataclass(frozen=True)
+class NelderMeadSettings:
+    initial_step: float = 0.15
+    xatol: float = 1e-5
+    fatol: float = 1e-7
+    max_evaluations: int = 6000
+    restarts: int = 2
+
+
+@dataclass(frozen=True)
+class ExactSettings:
+    defect_iterations: int = 3
+    defect_step: float = 0.02
+    defect_tolerance: float = 1e-3
+    polish_evaluations: int = 0
+    polish_step: float = 0.005
+
+
+@dataclass(frozen=True)
+class GrfSettings:
+    sigma_jerk: float = 60.0
+    position_noise: float = 1.3e-4
+    moving_average: int = 5
+    apex_height: float = 0.36
+    forward_speed: float = 2.0
+    touchdown_angle_deg: float = 17.0
+    tau_0: float = 5.0
+
+
+@dataclass(frozen=True)
+class IdentificationSettings:
+    predictor: str
+    folds: int
+    seed: int
+    fitted: tuple[str, ...]
+    initial: ModelParams
+    bounds: dict[str, tuple[float, float]]
+    nelder_mead: NelderMeadSettings
+    exact: ExactSettings
+    failed_stride_error_pct: float
+    extraction: ExtractionSettings
+    grf: GrfSettings = GrfSettings()
+
+    def with_changes(self, **changes) -> "IdentificationSettings":
+        out = replace(self, **changes)
+        _validate(out, "settings")
+        return out
+
+
+def _numbers(section: Mapping[str, Any], cls, where: str):
+    known = {f.name: f for f in fields(cls)}
+    if not isinstance(section, Mapping):
+        raise ValueError(f"{where} must be a mapping")
+    unknown = sorted(set(section) - set(known))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
+    values = {}
+    for key, value in section.items():
+        default = getattr(cls, key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{where}.{key} must be a number, got {value!r}")
+        values[key] = type(default)(value)
+    return cls(**values)
+
+
+def settings_from_dict(data: Mapping[str, Any], source: str = "identification settings") -> IdentificationSettings:
+    if isinstance(data, Mapping) and "identification" in data:
+        data = data["identification"]
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{source}: expected a mapping under `identification:`")
+    try:
+        initial = ModelParams.from_dict(data["initial"], source=f"{source}: identification.initial")
+        bounds_data = data["bounds"]
+        if not isinstance(bounds_data, Mapping):
+            raise ValueError(f"{source}: identification.bounds must be a mapping")
+        bounds = {}
+        for name, pair in bounds_data.items():
+            if name not in FITTABLE:
+                raise ValueError(f"{source}: identification.bounds.{name}: not a fittable parameter {list(FITTABLE)}")
+            if not (isinstance(pair, (list, tuple)) and len(pair) == 2 and all(isinstance(v, (int, float)) for v in pair)):
+                raise ValueError(f"{source}: identification.bounds.{name} must be [low, high], got {pair!r}")
+            bounds[name] = (float(pair[0]), float(pair[1]))
+        settings = IdentificationSettings(
+            predictor=str(data.get("predictor", "aas")),
+            folds=int(data["folds"]),
+            seed=int(data.get("seed", 0)),
+            fitted=tuple(data["fitted"]),
+            initial=initial,
+            bounds=bounds,
+            nelder_mead=_numbers(data.get("nelder_mead", {}), NelderMeadSettings, f"{source}: identification.nelder_mead"),
+            exact=_numbers(data.get("exact", {}), ExactSettings, f"{source}: identification.exact"),
+            failed_stride_error_pct=float(data.get("failed_stride_error_pct", 100.0)),
+            extraction=ExtractionSettings.from_dict(data.get("extraction", {}), f"{source}: identification.extraction"),
+            grf=_numbers(data.get("grf", {}), GrfSettings, f"{source}: identification.grf"),
+        )
+    except KeyError as exc:
+        raise ValueError(f"{source}: identification.{exc.args[0]} is missing") from None
+    _validate(settings, source)
+    return settings
+
+
+def _validate(s: IdentificationSettings, source: str) -> None:
+    if s.predictor not in PREDICTORS:
+        raise ValueError(f"{source}: predictor {s.predictor!r} is not one of {PREDICTORS}")
+    if s.folds < 2:
+        raise ValueError(f"{source}: folds must be at least 2, got {s.folds}")
+    unknown = [name for name in s.fitted if name not in FITTABLE]
+    if unknown or not s.fitted:
+        raise ValueError(f"{source}: fitted must name some of {list(FITTABLE)}, got {list(s.fitted)}")
+    if len(set(s.fitted)) != len(s.fitted):
+        raise ValueError(f"{source}: fitted names a parameter twice: {list(s.fitted)}")
+    for name in s.fitted:
+        if name not in s.bounds:
+            raise ValueError(f"{source}: fitted parameter {name} has no bounds")
+        low, high = s.bounds[name]
+        if not 0.0 < low < high:
+            raise ValueError(f"{source}: bounds of {name} must be 0 < low < high, got [{low}, {high}]")
+        value = getattr(s.initial, name)
+        if not low <= value <= high:
+            raise ValueError(f"{source}: initial {name} = {value} is outside its bounds [{low}, {high}]")
+    if s.nelder_mead.max_evaluations < 10 or s.nelder_mead.initial_step <= 0:
+        raise ValueError(f"{source}: nelder_mead needs max_evaluations >= 10 and a positive initial_step")
+
+
+def load_settings(name: str | os.PathLike = DEFAULT_FILE) -> IdentificationSettings:
+    return settings_from_dict(load_yaml(name), source=str(name))
