@@ -111,7 +111,7 @@ class Phase(str, Enum):
 
 
 #: keys of the config section that are the node's, not the driver's
-NODE_KEYS = frozenset({"hardware_file", "status_period", "diagnostics_period"})
+NODE_KEYS = frozenset({"hardware_file", "status_period", "status_decimation", "diagnostics_period"})
 
 
 @dataclass(frozen=True)

@@ -14,12 +14,13 @@ Single stride (`experiment:=single_stride`, with `tau_0` and `touchdown_angle`):
 data collection; the ramp ends at the model's predicted lift-off for the apex the robot is
 thrown to; after the second apex the leg is held and then the drive disabled.
 
-A MotorCommand goes out for every state estimate (`body_state`, 1 kHz), which feeds the motor
-driver's watchdog; the stride phase advances on `gait_event`. The logic is in
+A MotorCommand goes out whenever the command changes (every state estimate during the stance
+ramp, 1 kHz) and is repeated every `keep_alive` otherwise, which feeds the motor driver's watchdog; the stride phase advances on `gait_event`. The logic is in
 hopper_ros.control (no ROS); this node only connects it.
 
 Parameters (read only): model_file (model.yaml), config_file (control.yaml), experiment,
-tau_0, touchdown_angle, adaptation (overrides control.yaml).
+tau_0, touchdown_angle, adaptation (overrides control.yaml), keep_alive (an unchanged command is
+repeated this often, 5 ms: well inside the driver's 20 ms watchdog).
 """
 
 from __future__ import annotations
@@ -58,6 +59,8 @@ class DeadbeatControllerNode(Node):
         tau_0 = param("tau_0", math.nan, "single stride: initial torque [N m]")
         touchdown_angle = param("touchdown_angle", math.nan, "single stride: touchdown angle [rad]")
         adaptation = param("adaptation", "", "override control.yaml: true or false")
+        self.keep_alive = param("keep_alive", 0.005, "[s] an unchanged motor command is repeated this often")
+        self._last_sent = -math.inf
         settings = dict(load_yaml(config_file).get("deadbeat", {}))
         if adaptation:
             if adaptation not in ("true", "false"):
@@ -158,6 +161,8 @@ class DeadbeatControllerNode(Node):
             self.get_logger().error(self.machine.reason)
 
     def _on_state(self, msg: BodyState) -> None:
+        """Each state estimate: the command for now, sent when it changes (the stance ramp: every
+        sample) and otherwise every `keep_alive` seconds, which feeds the driver's watchdog."""
         now = _seconds(msg.header.stamp)
         mode, setpoint = self.machine.command(now)
         if self.machine.phase is Phase.BRAKE:
@@ -166,9 +171,12 @@ class DeadbeatControllerNode(Node):
             elif now - self._brake_since > 0.5:
                 mode, setpoint = MotorCommand.MODE_DISABLED, 0.0     # the robot sits back: drive off
         command = self._command
+        if (mode, float(setpoint)) == (command.mode, command.setpoint) and now - self._last_sent < self.keep_alive:
+            return
         command.header.stamp = msg.header.stamp
         command.mode, command.setpoint = mode, float(setpoint)
         self._command_pub.publish(command)
+        self._last_sent = now
         self.counters["commands"] += 1
 
     # ------------------------------------------------------------------ outputs

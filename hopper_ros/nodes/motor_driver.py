@@ -1,8 +1,8 @@
 """motor_driver: the CANopen master of the hip's maxon EPOS2 (the only thing that talks to it).
 
 Subscribes `motor_command` (MotorCommand: disabled, hip torque [N m] or leg angle [rad]);
-publishes `motor_status` (MotorStatus) after every SYNC's TPDOs (1 kHz), at least every
-`status_period`, and `diagnostics` (NodeDiagnostics) every `diagnostics_period` and at once on a
+publishes `motor_status` (MotorStatus) after every `status_decimation`-th SYNC's TPDOs (1: 1 kHz),
+at least every `status_period`, and `diagnostics` (NodeDiagnostics) every `diagnostics_period` and at once on a
 new problem. A thread of its own runs the 1 kHz CAN cycle (SYNC, PDOs, state machine, watchdog);
 commands reach the bus from the subscription callback at once.
 
@@ -84,6 +84,10 @@ class MotorDriverNode(Node):
         sync_period = self.declare_parameter(
             "sync_period", float(section.get("sync_period", DriverSettings.sync_period)), read_only("[s] SYNC period")).value
         self._status_period = float(section.get("status_period", 0.1))
+        self._status_decimation = max(1, int(self.declare_parameter(
+            "status_decimation", int(section.get("status_decimation", 1)),
+            read_only("motor_status on every Nth TPDO set (1: every SYNC)")).value))
+        self._tpdo_sets = 0
         diagnostics_period = float(section.get("diagnostics_period", 0.5))
         settings = DriverSettings.from_mapping(section, command_timeout=command_timeout, sync_period=sync_period)
         hardware = load_hardware(hardware_file)
@@ -199,7 +203,9 @@ class MotorDriverNode(Node):
                     with self._lock:
                         fresh = driver.handle(frame)
                     if fresh:
-                        self._publish_status()
+                        self._tpdo_sets += 1
+                        if self._tpdo_sets % self._status_decimation == 0:
+                            self._publish_status()
                 if time.monotonic() - self._last_status > self._status_period:
                     self._publish_status()
             except Exception as exc:  # noqa: BLE001 - the cycle must go on (the drive's consumer is the backstop)

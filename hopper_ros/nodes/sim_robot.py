@@ -20,7 +20,7 @@ Parameters (read only):
   udp_host, udp_port: override hardware.yaml's microcontroller destination
   enable_effects, disable_effects: effect names to switch on/off (see config/sim.yaml)
   apex_height, forward_speed, leg_angle: the initial throw (default: sim.yaml initial_apex)
-  publish_truth: publish sim/truth (default true; sim/events always)
+  publish_truth, force_plate: publish sim/truth, force_plate (default true; sim/events always)
   throw_lead: throws start this long before their apex, rising, so the apex is a natural one
       the sensing sees (default 0.05 s); hold: the robot is held at its first throw's start
       until the first `sim/throw` (as the researcher holds it until the graph is up)
@@ -101,6 +101,7 @@ class SimRobotNode(Node):
         experiments = param("experiments", False, "run built-in single-stride experiments (can:=none)")
         hold = param("hold", False, "hold the robot at its first throw until sim/throw")
         self.publish_truth = param("publish_truth", True, "publish sim/truth at 1 kHz")
+        self.publish_force = param("force_plate", True, "publish the force plate at 1 kHz")
         self.throw_lead = param("throw_lead", 0.05, "throws start this long before the apex [s]")
         if self.mode not in ("realtime", "lockstep"):
             raise ValueError(f"mode must be realtime or lockstep, got {self.mode!r}")
@@ -188,11 +189,12 @@ class SimRobotNode(Node):
         except OSError:
             self.counters["udp_errors"] += 1
         force, state, truth = self._force_msg, self._truth_msg, sample.truth
-        self._stamp(truth.t, force.header.stamp)
-        force.force_forward, force.force_vertical = sample.force.forward, sample.force.vertical
-        force.center_of_pressure = sample.force.center_of_pressure
-        force.contact = sample.force.contact
-        self._force.publish(force)
+        if self.publish_force:
+            self._stamp(truth.t, force.header.stamp)
+            force.force_forward, force.force_vertical = sample.force.forward, sample.force.vertical
+            force.center_of_pressure = sample.force.center_of_pressure
+            force.contact = sample.force.contact
+            self._force.publish(force)
         if self.publish_truth:
             self._stamp(truth.t, state.header.stamp)
             state.sequence = sample.packet.sequence
