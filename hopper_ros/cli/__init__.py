@@ -25,6 +25,7 @@ COMMANDS = {
     "collect": "hopper_ros.cli.collect",
     "identify": "hopper_ros.cli.identify",
     "report": "hopper_ros.cli.report",
+    "diagnose": "hopper_ros.cli.diagnose",
 }
 
 
