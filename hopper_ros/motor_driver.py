@@ -119,6 +119,7 @@ class DriverSettings:
     """Timing and safety settings (config/motor_driver.yaml, section `motor_driver`)."""
 
     sync_period: float = 0.001          # [s] SYNC / PDO exchange period
+    rpdo_refresh: float = 0.01          # [s] an unchanged RPDO is sent again this often (else every change)
     command_timeout: float = 0.02       # [s] no valid command this long: quick stop, then disable
     quick_stop_time: float = 0.01       # [s] longest QUICK STOP ACTIVE before disable voltage
     heartbeat_timeout: float = 0.3      # [s] drive heartbeat missing this long: lost
@@ -291,6 +292,8 @@ class MotorDriver:
         self._last_cw: int | None = None
         # cyclic exchange
         self._sent_since_sync: tuple[int, bytes] | None = None
+        self._last_rpdo: tuple[int, bytes] | None = None   # the last RPDO sent and when
+        self._last_rpdo_time = -math.inf
         self._tpdo_seen = 0                 # TPDOs received since the last SYNC (bit n-1: TPDO n)
         self._sync_outstanding = False
         self._next_master_heartbeat = now
@@ -682,14 +685,16 @@ class MotorDriver:
         number = 2 if self._mode == MODE_POSITION else 1
         frame = self._rpdo_frame(number, controlword)
         key = (number, bytes(frame.data))
-        if not force and self._sent_since_sync == key:
-            return                                  # this period's RPDO is out already
+        if not force and (self._sent_since_sync == key or (
+                key == self._last_rpdo and now - self._last_rpdo_time < self.settings.rpdo_refresh)):
+            return          # this period's RPDO is out already, or the drive has it (applied on reception)
         if self._send(frame):
             if controlword & Command.FAULT_RESET and not (self._last_cw or 0) & Command.FAULT_RESET:
                 self._reset_edges += 1
                 self._reset_edge_at = now
             self._last_cw = controlword
             self._sent_since_sync = key
+            self._last_rpdo, self._last_rpdo_time = key, now
 
     # ================================================================== start-up and shutdown
 

@@ -128,7 +128,6 @@ class SimRobotNode(Node):
         self.create_timer(DIAGNOSTICS_PERIOD, self._report)
 
         self.finished = False                       # run_node ends the process once set
-        self._wake = self.create_guard_condition(lambda: None)
         self._lock = threading.Lock()
         self._pending_throw = None
         self._stop = threading.Event()
@@ -154,7 +153,6 @@ class SimRobotNode(Node):
                 self.get_logger().info(f"simulated {self.robot.t:.3f} s: done, real-time factor "
                                        f"{self.realtime_factor():.2f}")
                 self.finished = True
-                self._wake.trigger()
                 return
             if self.series is not None and (self.robot.experiment is None or self.robot.experiment.done):
                 self.series.start_next()
