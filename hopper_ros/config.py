@@ -42,10 +42,24 @@ def config_path(name: str | os.PathLike) -> Path:
 
 
 def load_yaml(name: str | os.PathLike) -> Any:
-    """Read one YAML config file, with the file named in any error."""
+    """Read one YAML config file, with the file named in any error.
+
+    A mapping with a top-level `base: OTHER.yaml` is that file with this one's keys merged over
+    it (mappings merged key by key), so a variant names only what it changes.
+    """
     path = config_path(name)
     try:
         with open(path, encoding="utf-8") as handle:
-            return yaml.safe_load(handle)
+            data = yaml.safe_load(handle)
     except yaml.YAMLError as exc:
         raise ValueError(f"{path}: not valid YAML: {exc}") from exc
+    if isinstance(data, dict) and "base" in data:
+        base = data.pop("base")
+        data = _merge(load_yaml(base), data)
+    return data
+
+
+def _merge(base: Any, changes: Any) -> Any:
+    if isinstance(base, dict) and isinstance(changes, dict):
+        return {**base, **{key: _merge(base.get(key), value) for key, value in changes.items()}}
+    return changes

@@ -65,8 +65,8 @@ from hopper_ros.hardware.encoders import Encoder
 from hopper_ros.hardware.motor import RPM_PER_RAD_S, HipMotor
 
 # MotorCommand modes (the message's constants, repeated here to stay ROS-free)
-MODE_DISABLED, MODE_CURRENT, MODE_POSITION = 0, 1, 2
-MODE_NAMES = {MODE_DISABLED: "disabled", MODE_CURRENT: "current", MODE_POSITION: "position"}
+MODE_DISABLED, MODE_CURRENT, MODE_POSITION, MODE_RAMP = 0, 1, 2, 3
+MODE_NAMES = {MODE_DISABLED: "disabled", MODE_CURRENT: "current", MODE_POSITION: "position", MODE_RAMP: "ramp"}
 
 # ------------------------------------------------------------------------------- PDO layout
 
@@ -120,6 +120,7 @@ class DriverSettings:
 
     sync_period: float = 0.001          # [s] SYNC / PDO exchange period
     rpdo_refresh: float = 0.01          # [s] an unchanged RPDO is sent again this often (else every change)
+    max_ramp_age: float = 0.005         # [s] MODE_RAMP: a ramp command older than this starts this far back
     command_timeout: float = 0.02       # [s] no valid command this long: quick stop, then disable
     quick_stop_time: float = 0.01       # [s] longest QUICK STOP ACTIVE before disable voltage
     heartbeat_timeout: float = 0.3      # [s] drive heartbeat missing this long: lost
@@ -292,6 +293,7 @@ class MotorDriver:
         self._last_cw: int | None = None
         # cyclic exchange
         self._sent_since_sync: tuple[int, bytes] | None = None
+        self._ramp: tuple[float, float, float] | None = None   # MODE_RAMP: (tau_0, duration, start)
         self._last_rpdo: tuple[int, bytes] | None = None   # the last RPDO sent and when
         self._last_rpdo_time = -math.inf
         self._tpdo_seen = 0                 # TPDOs received since the last SYNC (bit n-1: TPDO n)
@@ -306,9 +308,17 @@ class MotorDriver:
 
     # ================================================================== public API
 
-    def command(self, mode: int, setpoint: float) -> bool:
-        """Take one motor command; False (counted, ignored) if it is invalid."""
+    def command(self, mode: int, setpoint: float, duration: float = 0.0, age: float = 0.0) -> bool:
+        """Take one motor command; False (counted, ignored) if it is invalid.
+
+        MODE_RAMP: the stance ramp of (2.32), hip torque -setpoint (1 - t/duration) for t in
+        [0, duration) from `age` seconds ago (when the command was issued), then 0. The driver's
+        own 1 kHz cycle computes the current of every period, so jitter in the command stream
+        does not stretch or shift the ramp; repeats of the same ramp keep its start.
+        """
         now = self.clock()
+        if mode == MODE_RAMP and not (math.isfinite(duration) and duration > 0.0 and math.isfinite(age)):
+            mode = -1                                       # rejected below
         if mode not in MODE_NAMES or (mode != MODE_DISABLED and not math.isfinite(setpoint)):
             self.counters["commands_rejected"] += 1
             self._event(WARN, f"rejected motor command: mode {mode}, setpoint {setpoint!r}", key="rejected")
@@ -325,8 +335,15 @@ class MotorDriver:
             self._want_enabled, self._quick_stop = True, False
             if mode == MODE_CURRENT:
                 self._current_ma = self._current_setting(setpoint)
+            elif mode == MODE_RAMP:
+                if self._ramp is None or self._ramp[:2] != (setpoint, duration):
+                    # anchored at the touchdown, unless the command came late: a ramp skipped is energy lost
+                    self._ramp = (setpoint, duration, now - min(max(0.0, age), self.settings.max_ramp_age))
+                self._current_ma = self._current_setting(self._ramp_torque(now))
             else:
                 self._position_qc = self._position_setting(setpoint)
+            if mode != MODE_RAMP:
+                self._ramp = None
         if self.phase is Phase.RUNNING:
             self._send_rpdo(now, force=True)
         return True
@@ -671,9 +688,16 @@ class MotorDriver:
             return Command.DISABLE_VOLTAGE
         return Command.FAULT_RESET
 
+    def _ramp_torque(self, now: float) -> float:
+        tau_0, duration, start = self._ramp
+        elapsed = now - start
+        return -tau_0 * (1.0 - elapsed / duration) if 0.0 <= elapsed < duration else 0.0   # (2.32)
+
     def _rpdo_frame(self, number: int, controlword: int) -> can.Message:
         if number == 1:
-            setting = self._current_ma if (self._want_enabled and self._mode == MODE_CURRENT) else 0
+            if self._mode == MODE_RAMP and self._ramp is not None:
+                self._current_ma = self._current_setting(self._ramp_torque(self.clock()))
+            setting = self._current_ma if (self._want_enabled and self._mode in (MODE_CURRENT, MODE_RAMP)) else 0
             values = (controlword, OperationMode.CURRENT, setting)
         else:
             values = (controlword, OperationMode.POSITION, self._position_qc)

@@ -72,9 +72,10 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         touchdown.header.stamp = stamp(10.2)
         events.publish(touchdown)
         spin_until(executor, lambda: False, timeout=0.2)
-        ramp = tick(10.22)
-        expected = -decision.tau_0 * (1.0 - 0.02 / decision.predicted_liftoff_time)
-        assert ramp.mode == MotorCommand.MODE_CURRENT and ramp.setpoint == pytest.approx(expected, rel=1e-6)
+        ramp = tick(10.22)                     # the driver runs the ramp, from the touchdown's stamp
+        assert (ramp.mode, ramp.setpoint, ramp.duration) == (
+            MotorCommand.MODE_RAMP, pytest.approx(decision.tau_0), pytest.approx(decision.predicted_liftoff_time))
+        assert (ramp.header.stamp.sec, ramp.header.stamp.nanosec) == (10, 200_000_000)
         liftoff = GaitEvent(type=GaitEvent.LIFTOFF)
         liftoff.state.leg_angle = -0.31
         events.publish(liftoff)

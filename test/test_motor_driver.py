@@ -26,6 +26,7 @@ from hopper_ros.motor_driver import (
     MODE_CURRENT,
     MODE_DISABLED,
     MODE_POSITION,
+    MODE_RAMP,
     WARN,
     DriverSettings,
     MotorDriver,
@@ -276,6 +277,24 @@ def test_pdo_contents_and_scaling_with_the_current_limit(rig):
     assert status.current == pytest.approx(tpdo1[2].raw / 1000.0)
     assert status.torque == pytest.approx(status.current * K_T * GEAR)
     assert tpdo1[0].raw == status.statusword == eo.STATUSWORD_OF_STATE[State.OPERATION_ENABLED]
+
+
+def test_ramp_mode_runs_the_stance_ramp_in_the_driver_from_its_start(rig):
+    r = rig().start()
+    r.enable(torque=1.0)
+    tau_0, duration, age = 6.0, 0.05, 0.004               # the touchdown was 4 ms before the command arrived
+    r.driver.command(MODE_RAMP, tau_0, duration, age)
+    start = r.clock.t - age
+    seen = []
+    for _ in range(60):                                   # repeats of the same ramp (keep-alive) keep its start
+        r.step(1, command=(MODE_RAMP, tau_0, duration, 0.0))
+        seen.append((r.clock.t, r.rpdos[-1][2][2]))
+    for t, milliamps in seen:
+        elapsed = t - start
+        torque = -tau_0 * (1.0 - elapsed / duration) if elapsed < duration else 0.0
+        assert milliamps == pytest.approx(_milliamps(torque), abs=1)
+    assert seen[-1][1] == 0 and r.driver.counters["commands_rejected"] == 0
+    assert not r.driver.command(MODE_RAMP, tau_0, 0.0)   # a ramp needs a positive duration
 
 
 def test_command_watchdog_quick_stops_then_disables_and_recovers(rig):

@@ -14,8 +14,10 @@ Single stride (`experiment:=single_stride`, with `tau_0` and `touchdown_angle`):
 data collection; the ramp ends at the model's predicted lift-off for the apex the robot is
 thrown to; after the second apex the leg is held and then the drive disabled.
 
-A MotorCommand goes out whenever the command changes (every state estimate during the stance
-ramp, 1 kHz) and is repeated every `keep_alive` otherwise, which feeds the motor driver's watchdog; the stride phase advances on `gait_event`. The logic is in
+A MotorCommand goes out whenever the command changes and is repeated every `keep_alive`
+otherwise, which feeds the motor driver's watchdog. In stance it is MODE_RAMP stamped with the
+touchdown time: the driver computes the ramp's current every SYNC period itself, so delays and
+jitter of the command stream (seven Python processes on two cores) neither shift nor stretch it; the stride phase advances on `gait_event`. The logic is in
 hopper_ros.control (no ROS); this node only connects it.
 
 Parameters (read only): model_file (model.yaml), config_file (control.yaml), experiment,
@@ -61,6 +63,7 @@ class DeadbeatControllerNode(Node):
         adaptation = param("adaptation", "", "override control.yaml: true or false")
         self.keep_alive = param("keep_alive", 0.005, "[s] an unchanged motor command is repeated this often")
         self._last_sent = -math.inf
+        self._touchdown_stamp = None
         settings = dict(load_yaml(config_file).get("deadbeat", {}))
         if adaptation:
             if adaptation not in ("true", "false"):
@@ -149,6 +152,7 @@ class DeadbeatControllerNode(Node):
             self.machine.on_pre_touchdown()
         elif msg.type == GaitEvent.TOUCHDOWN:
             self.machine.on_touchdown(when)
+            self._touchdown_stamp = msg.header.stamp
         elif msg.type == GaitEvent.LIFTOFF:
             self.machine.on_liftoff(msg.state.leg_angle)
 
@@ -171,9 +175,17 @@ class DeadbeatControllerNode(Node):
             elif now - self._brake_since > 0.5:
                 mode, setpoint = MotorCommand.MODE_DISABLED, 0.0     # the robot sits back: drive off
         command = self._command
+        stamp = msg.header.stamp
+        if self.machine.phase is Phase.STANCE and self.machine.plan is not None:
+            # the driver runs the ramp itself, from the touchdown time: jitter in this stream cannot shift it
+            mode, setpoint = MotorCommand.MODE_RAMP, self.machine.plan.tau_0
+            command.duration = self.machine.plan.ramp_duration
+            stamp = self._touchdown_stamp
+        else:
+            command.duration = 0.0
         if (mode, float(setpoint)) == (command.mode, command.setpoint) and now - self._last_sent < self.keep_alive:
             return
-        command.header.stamp = msg.header.stamp
+        command.header.stamp = stamp
         command.mode, command.setpoint = mode, float(setpoint)
         self._command_pub.publish(command)
         self._last_sent = now

@@ -120,8 +120,12 @@ class MotorDriverNode(Node):
     # ------------------------------------------------------------------ ROS side
 
     def _on_command(self, msg: MotorCommand) -> None:
+        age = 0.0
+        if msg.mode == MotorCommand.MODE_RAMP:   # the ramp started at the stamp (touchdown), on the host clock
+            stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+            age = self.get_clock().now().nanoseconds * 1e-9 - stamp
         with self._lock:
-            self._driver.command(msg.mode, msg.setpoint)
+            self._driver.command(msg.mode, msg.setpoint, msg.duration, age)
 
     def _publish_status(self) -> None:
         with self._lock:

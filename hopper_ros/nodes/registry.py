@@ -10,5 +10,8 @@ NODES = {
     "stride_predictor": "hopper_ros.nodes.stride_predictor:main",
     "motor_driver": "hopper_ros.nodes.motor_driver:main",
     "sim_robot": "hopper_ros.nodes.sim_robot:main",
+    "encoder_bridge": "hopper_ros.nodes.encoder_bridge:main",
+    "state_estimator": "hopper_ros.nodes.state_estimator:main",
+    "event_detector": "hopper_ros.nodes.event_detector:main",
     "deadbeat_controller": "hopper_ros.nodes.deadbeat_controller:main",
 }

@@ -25,6 +25,7 @@ Parameters (read only):
       the sensing sees (default 0.05 s); hold: the robot is held at its first throw's start
       until the first `sim/throw` (as the researcher holds it until the graph is up)
   duration: simulated time to run [s], then the node ends (0: run until stopped)
+  period: the sample and control period [s] (0: sim.yaml's 1 ms)
   experiments: run section 4.1's single-stride experiments itself, one after another, inputs
       drawn from the thesis's ranges (data collection without a controller; needs can:=none)
 """
@@ -93,6 +94,9 @@ class SimRobotNode(Node):
         config = load_sim_config(sim_file)
         switches = {name: True for name in enable if name} | {name: False for name in disable if name}
         config = config.with_effects(**switches)
+        period = param("period", 0.0, "[s] sample and control period (0: the sim file's, 1 ms)")
+        if period:
+            config = dataclasses.replace(config, period=float(period))
         apex = config.initial_apex
         apex_height = param("apex_height", apex["apex_height"], "initial apex height [m]")
         forward_speed = param("forward_speed", apex["forward_speed"], "initial forward speed [m/s]")

@@ -1,0 +1,121 @@
+"""The whole node graph's logic in one process, in lockstep with the simulated robot, no ROS.
+
+Per 1 ms period, the same modules the nodes wrap, in the order the data flows:
+sim_robot (SimRobot with its emulated EPOS2 on a python-can virtual bus) -> the UDP packet bytes
+-> encoder bridge, state estimator, event detector (sensing.pipeline) -> deadbeat controller and
+stride machine -> motor driver (our CANopen master on the same virtual bus) -> CAN frames that the
+emulated drive takes at the next period. Each module sees exactly what its node would, minus the
+transport delays; a run is deterministic and many times faster than real time. Used by the tests
+to check the loop end to end (signs, units, timing) and by the benchmarks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping
+
+import can
+
+from hopper_ros.canbus.epos2_emulator import Epos2Emulator
+from hopper_ros.hardware import packet as packet_format
+from hopper_ros.motor_driver import DriverSettings, MotorDriver
+from hopper_ros.sensing.pipeline import SensingPipeline
+from hopper_ros.sensing.samples import EventType
+from hopper_ros.sim.robot import SimRobot
+
+from .deadbeat import DeadbeatController, StrideDecision
+from .stride_machine import StrideMachine, StridePlan
+
+_CHANNELS = iter(range(1 << 30))
+
+
+@dataclass
+class GraphRun:
+    decisions: list[StrideDecision] = field(default_factory=list)
+    apexes: list[tuple[float, float, float]] = field(default_factory=list)       # (time, height, speed) detected
+    true_apexes: list[tuple[float, float, float]] = field(default_factory=list)  # from the simulator
+    fell: bool = False
+
+
+class GraphLockstep:
+    """Simulated robot + sensing + controller + motor driver, stepped together."""
+
+    def __init__(self, sim_config, hardware: Mapping[str, Any], controller: DeadbeatController,
+                 driver_settings: DriverSettings | None = None) -> None:
+        channel = f"graph_lockstep_{next(_CHANNELS)}"
+        self._drive_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        self._master_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        self.robot = SimRobot(sim_config, hardware, drive=Epos2Emulator(self._drive_bus, hardware))
+        self.driver = MotorDriver(self._master_bus, hardware, driver_settings or DriverSettings(), clock=self._now)
+        self.sensing = SensingPipeline.from_files(hardware=hardware)
+        self.controller = controller
+        self.machine = StrideMachine()
+        self.setpoint: tuple[float, float] | None = None
+
+    def _now(self) -> float:
+        return self.robot.t
+
+    def close(self) -> None:
+        self._drive_bus.shutdown()
+        self._master_bus.shutdown()
+
+    def set_setpoint(self, height: float, speed: float) -> None:
+        self.setpoint = (height, speed)
+        self.machine.hold(self.controller.neutral_angle(speed))
+
+    def step(self, run: GraphRun) -> None:
+        sample = self.robot.step()
+        for event in sample.events:
+            if event.kind == "apex":
+                run.true_apexes.append((event.t, event.z, event.ydot))
+            elif event.kind == "fall":
+                run.fell = True
+        output = self.sensing.process(packet_format.encode(sample.packet), sample.truth.t)
+        for event in output.events:
+            self._on_event(event, run)
+        if output.estimates:
+            mode, setpoint = self.machine.command(output.estimates[-1].stamp)
+            self.driver.command(mode, setpoint)
+        self.driver.cycle()
+        while (frame := self._master_bus.recv(timeout=0.0)) is not None:
+            self.driver.handle(frame)
+
+    def _on_event(self, event, run: GraphRun) -> None:
+        state = event.state
+        if event.kind is EventType.APEX:
+            run.apexes.append((event.time, state.z, state.y_dot))
+            self.controller.observe(state.z, state.y_dot)
+            if self.setpoint is None:
+                return
+            first = self.controller.first_decision(state.z, state.y_dot, *self.setpoint, event.stride_index)
+            self.machine.on_apex(StridePlan(first.tau_0, first.touchdown_angle, first.ramp_duration)
+                                 if first.feasible else None, first.reason)
+            decision = self.controller.refine(first, state.z, state.y_dot)
+            if decision.feasible and decision is not first:
+                self.machine.revise(StridePlan(decision.tau_0, decision.touchdown_angle, decision.ramp_duration))
+            run.decisions.append(decision)
+        elif event.kind is EventType.PRE_TOUCHDOWN:
+            self.machine.on_pre_touchdown()
+        elif event.kind is EventType.TOUCHDOWN:
+            self.machine.on_touchdown(event.time)
+        elif event.kind is EventType.LIFTOFF:
+            self.machine.on_liftoff(state.leg_angle)
+
+    def run(self, setpoints: Iterable[tuple[float, float]], settle_time: float = 0.5,
+            max_time: float = 600.0) -> GraphRun:
+        """Hold the robot until the drive is enabled, throw it, then one setpoint per detected apex."""
+        setpoints = list(setpoints)
+        run = GraphRun()
+        self.set_setpoint(*setpoints[0])
+        height, speed = setpoints[0]
+        self.robot.throw(height, speed, self.controller.neutral_angle(speed), lead_time=0.05, hold=True)
+        while self.robot.t < settle_time:
+            self.step(run)
+        self.robot.plant.release()
+        while len(run.apexes) <= len(setpoints) and not run.fell and self.robot.t < max_time:
+            index = min(len(run.apexes), len(setpoints) - 1)
+            if setpoints[index] != self.setpoint:
+                self.set_setpoint(*setpoints[index])
+            self.step(run)
+        return run
+

@@ -1,0 +1,143 @@
+"""encoder_bridge: the microcontroller's UDP encoder packets onto ROS topics.
+
+A receiving thread of its own takes each datagram as it arrives and hands it to
+`hopper_ros.sensing.bridge.EncoderBridge` (checks: size, magic, version, CRC, sequence, clock;
+32-bit counters unwrapped; appendix A conversions; hip torque from the current). Every accepted
+packet is published at once (1 kHz) on
+  `encoder_sample` (EncoderSample): the raw sample as decoded, stamped with its receive time,
+  `body_measurement` (BodyMeasurement): boom angles, y, z, leg angle, motor current, hip torque;
+a rejected packet is counted and dropped, never published. `diagnostics` (NodeDiagnostics, every
+`diagnostics_period`): counters (packets_received, samples_accepted, packets_lost, malformed_*,
+duplicates, reordered, sequence_jump, clock_backwards, clock_inconsistent, stream_resyncs,
+counter_wraps) and values (sample_rate_hz, loss_ratio over the period, process_time_max_s).
+
+Parameters (read only):
+  sensing_file (string): sensing settings, default `sensing.yaml` (config/sensing.yaml)
+  hardware_file (string): boom, encoders, motor, microcontroller ("" = sensing_file's hardware_file)
+  host (string), port (int): where to listen ("" / 0 = hardware.yaml `microcontroller.host/port`)
+  diagnostics_period (double) [s]: 0 = sensing_file's
+
+The logic lives in hopper_ros.sensing.bridge; this node only connects it to a socket and ROS.
+"""
+
+from __future__ import annotations
+
+import socket
+import sys
+import threading
+import time
+
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+
+from hopper_ros.config import load_yaml
+from hopper_ros.msg import BodyMeasurement, EncoderSample, NodeDiagnostics
+from hopper_ros.nodes.common import run_node
+from hopper_ros.sensing.bridge import MALFORMED, ORDER, EncoderBridge
+from hopper_ros.sensing.config import load_sensing_config
+from hopper_ros.sensing.messages import (CounterDeltas, any_of, diagnostics_msg, fill_body_measurement,
+                                         fill_encoder_sample, sample_qos)
+
+RECEIVE_TIMEOUT = 0.2     # [s] the receiving thread checks for shutdown this often
+DATAGRAM_BUFFER = 2048    # [bytes] larger than any packet, so an oversized one shows its real size
+
+
+class EncoderBridgeNode(Node):
+    def __init__(self, **node_kwargs):
+        node_kwargs.setdefault("start_parameter_services", False)   # read-only parameters, fewer entities
+        super().__init__("encoder_bridge", **node_kwargs)
+        param = lambda name, default, text: self.declare_parameter(  # noqa: E731
+            name, default, ParameterDescriptor(description=text, read_only=True)).value
+        config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
+        hardware = load_yaml(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
+                             config.hardware_file)
+        microcontroller = hardware["microcontroller"]
+        host = param("host", "", "address to listen on ('' = hardware.yaml)") or str(microcontroller["host"])
+        port = param("port", 0, "UDP port ('' = hardware.yaml)") or int(microcontroller["port"])
+        period = param("diagnostics_period", 0.0, "[s] diagnostics period (0 = sensing file)") or config.diagnostics_period
+        self.bridge = EncoderBridge.from_config(hardware, config.bridge)
+
+        self._socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, config.bridge.receive_buffer_bytes)
+        self._socket.bind((host, int(port)))
+        self._socket.settimeout(RECEIVE_TIMEOUT)
+        self._address = self._socket.getsockname()
+        self._sample_msg, self._measurement_msg = EncoderSample(), BodyMeasurement()
+        qos = sample_qos(config.queue_depth)
+        self._samples = self.create_publisher(EncoderSample, "encoder_sample", qos)
+        self._measurements = self.create_publisher(BodyMeasurement, "body_measurement", qos)
+        self._diagnostics = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        self.create_timer(period, self._report)
+        self._deltas = CounterDeltas()
+        self._reported_problem = ""
+        self._process_time_max = 0.0
+        self._lock = threading.Lock()
+        # the receiving thread must get the interpreter within a fraction of a sample period
+        sys.setswitchinterval(min(sys.getswitchinterval(), 2.5e-4))
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._receive, name="encoder-udp", daemon=True)
+        self._thread.start()
+        receive_buffer = self._socket.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        self.get_logger().info(f"listening on udp {self._address[0]}:{self._address[1]} "
+                               f"(receive buffer {receive_buffer} bytes), diagnostics every {period:g} s")
+
+    # ------------------------------------------------------------------ receiving thread
+    def _receive(self) -> None:
+        sock, bridge = self._socket, self.bridge
+        while not self._stop.is_set():
+            try:
+                datagram = sock.recv(DATAGRAM_BUFFER)
+            except socket.timeout:
+                continue
+            except OSError:
+                if self._stop.is_set():
+                    return
+                raise
+            received = time.time()
+            started = time.perf_counter()
+            with self._lock:
+                sample = bridge.process(datagram, received)
+            if sample is None:
+                continue
+            # the loop's path first: the estimator waits for body_measurement, encoder_sample is for the record
+            self._measurements.publish(fill_body_measurement(self._measurement_msg, sample))
+            self._samples.publish(fill_encoder_sample(self._sample_msg, sample))
+            elapsed = time.perf_counter() - started
+            if elapsed > self._process_time_max:
+                self._process_time_max = elapsed
+
+    # ------------------------------------------------------------------ diagnostics
+    def _report(self) -> None:
+        now = time.time()
+        with self._lock:
+            counters = dict(self.bridge.counters)
+            problem = self.bridge.last_problem
+        deltas, elapsed = self._deltas.update(counters, now)
+        accepted, lost = deltas["samples_accepted"], deltas["packets_lost"]
+        values = {
+            "sample_rate_hz": accepted / elapsed if elapsed > 0 else float("nan"),
+            "loss_ratio": lost / (accepted + lost) if accepted + lost else 0.0,
+            "process_time_max_s": self._process_time_max,
+        }
+        self._process_time_max = 0.0
+        new_problem = any_of(deltas, ("packets_lost", *MALFORMED, *ORDER))
+        if new_problem and problem != self._reported_problem:
+            self.get_logger().warning(problem)
+            self._reported_problem = problem
+        self._diagnostics.publish(diagnostics_msg(self.get_fully_qualified_name(), now, counters, values,
+                                                  problem if new_problem else ""))
+
+    def destroy_node(self):
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(2.0)
+        self._socket.close()
+        return super().destroy_node()
+
+
+def main(args=None) -> int:
+    return run_node(EncoderBridgeNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

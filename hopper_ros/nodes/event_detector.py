@@ -1,0 +1,89 @@
+"""event_detector: apex, pre-touchdown, touchdown, bottom and lift-off from the state estimate.
+
+Subscribes `body_state` (BodyState, from state_estimator); publishes every event it detects on
+`gait_event` (GaitEvent: stamped with the event's own time, interpolated between samples; the
+stride index; detection_delay = host time of publication minus the event's time, negative for a
+pre-touchdown published ahead; the state at the event, `state.sequence` the sample that revealed
+it) and each apex also on `apex` (ApexState: height, forward speed, y, leg angle; stride_index n
+opens stride n), which stride_predictor and setpoint_scheduler consume. `diagnostics`
+(NodeDiagnostics, every `diagnostics_period`): counters (samples, untrusted_samples, track_lost,
+track_acquired, strides and one per event type) and values (detection_delay_max_s over the period,
+process_time_max_s).
+
+Parameters (read only):
+  sensing_file (string): default `sensing.yaml` (config/sensing.yaml, section detector)
+  model_file (string): rho_0, k, d, g, flight damping ("" = the sensing file's, model.yaml)
+  diagnostics_period (double) [s]: 0 = sensing file's
+
+The logic lives in hopper_ros.sensing.events; this node only connects it to ROS.
+"""
+
+from __future__ import annotations
+
+import time
+
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+
+from hopper_ros.msg import ApexState, BodyState, GaitEvent, NodeDiagnostics
+from hopper_ros.nodes.common import run_node
+from hopper_ros.physics.params import load_params
+from hopper_ros.sensing.config import load_sensing_config
+from hopper_ros.sensing.events import EventDetector
+from hopper_ros.sensing.messages import (CounterDeltas, any_of, apex_state_msg, diagnostics_msg,
+                                         estimate_from_msg, gait_event_msg, sample_qos)
+from hopper_ros.sensing.samples import EventType
+
+EVENT_DEPTH = 100   # events are rare: a late subscriber of the last 0.1 s still gets them all
+
+
+class EventDetectorNode(Node):
+    def __init__(self, **node_kwargs):
+        node_kwargs.setdefault("start_parameter_services", False)
+        super().__init__("event_detector", **node_kwargs)
+        param = lambda name, default, text: self.declare_parameter(  # noqa: E731
+            name, default, ParameterDescriptor(description=text, read_only=True)).value
+        config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
+        model_file = param("model_file", "", "model parameters (YAML), '' = the sensing file's") or config.model_file
+        period = param("diagnostics_period", 0.0, "[s] diagnostics period (0 = sensing file)") or config.diagnostics_period
+        self.detector = EventDetector(load_params(model_file), config.detector)
+        self._events = self.create_publisher(GaitEvent, "gait_event", sample_qos(EVENT_DEPTH))
+        self._apexes = self.create_publisher(ApexState, "apex", 10)
+        self._diagnostics = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        self.create_subscription(BodyState, "body_state", self._on_state, sample_qos(config.queue_depth))
+        self.create_timer(period, self._report)
+        self._deltas = CounterDeltas()
+        self._delay_max = 0.0
+        self._process_time_max = 0.0
+        s = config.detector
+        self.get_logger().info(f"detecting gait events: rest length {self.detector.rest_length:g} m, "
+                               f"pre-touchdown {s.pre_touchdown_height * 1e2:g} cm above touchdown")
+
+    def _on_state(self, msg: BodyState) -> None:
+        started = time.perf_counter()
+        for event in self.detector.update(estimate_from_msg(msg)):
+            delay = time.time() - event.time
+            self._events.publish(gait_event_msg(event, delay))
+            if event.kind is EventType.APEX:
+                self._apexes.publish(apex_state_msg(event))
+            self._delay_max = max(self._delay_max, delay)
+        elapsed = time.perf_counter() - started
+        if elapsed > self._process_time_max:
+            self._process_time_max = elapsed
+
+    def _report(self) -> None:
+        now = time.time()
+        counters = dict(self.detector.counters)
+        deltas, _ = self._deltas.update(counters, now)
+        values = {"detection_delay_max_s": self._delay_max, "process_time_max_s": self._process_time_max}
+        self._delay_max = self._process_time_max = 0.0
+        problem = self.detector.last_problem if any_of(deltas, ("track_lost",)) else ""
+        self._diagnostics.publish(diagnostics_msg(self.get_fully_qualified_name(), now, counters, values, problem))
+
+
+def main(args=None) -> int:
+    return run_node(EventDetectorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,97 @@
+"""state_estimator: appendix A's Kalman filters on the converted encoder samples.
+
+Subscribes `body_measurement` (BodyMeasurement, from encoder_bridge); for each sample publishes
+`body_state` (BodyState): y, z and their velocities and accelerations (constant-acceleration
+filters, A.1.1), the leg angle and its rate, the covariance diagonal, stamped with the sample's
+instant on the host clock. Samples missing from the stream are bridged by predictions (one
+BodyState per missing sample, `measurement_used` false, dt from the microcontroller clock); a
+sample whose innovation fails the Mahalanobis gate is not used (`outlier_rejected`).
+`diagnostics` (NodeDiagnostics, every `diagnostics_period`): counters (measurements,
+predicted_samples, outliers_y/_z/_leg_angle, reinitialisations, stale_measurements) and values
+(sample_rate_hz, clock_offset_s, z_dot_std_m_per_s, process_time_max_s).
+
+Parameters (read only):
+  sensing_file (string): default `sensing.yaml` (config/sensing.yaml, section estimator)
+  hardware_file (string): "" = the sensing file's (encoder resolutions, sample period)
+  diagnostics_period (double) [s]: 0 = sensing file's
+
+The filter lives in hopper_ros.sensing.estimator; this node only connects it to ROS.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+
+from hopper_ros.config import load_yaml
+from hopper_ros.msg import BodyMeasurement, BodyState, NodeDiagnostics
+from hopper_ros.nodes.common import run_node
+from hopper_ros.sensing.config import load_sensing_config
+from hopper_ros.sensing.estimator import StateEstimator
+from hopper_ros.sensing.messages import (CounterDeltas, any_of, diagnostics_msg, fill_body_state,
+                                         measurement_from_msg, sample_qos)
+
+PROBLEM_COUNTERS = ("predicted_samples", "outliers_y", "outliers_z", "outliers_leg_angle", "reinitialisations",
+                    "stale_measurements")
+
+
+class StateEstimatorNode(Node):
+    def __init__(self, **node_kwargs):
+        node_kwargs.setdefault("start_parameter_services", False)
+        super().__init__("state_estimator", **node_kwargs)
+        param = lambda name, default, text: self.declare_parameter(  # noqa: E731
+            name, default, ParameterDescriptor(description=text, read_only=True)).value
+        config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
+        hardware = load_yaml(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
+                             config.hardware_file)
+        period = param("diagnostics_period", 0.0, "[s] diagnostics period (0 = sensing file)") or config.diagnostics_period
+        self.estimator = StateEstimator.from_config(config.estimator, hardware)
+        self._state_msg = BodyState()
+        qos = sample_qos(config.queue_depth)
+        self._states = self.create_publisher(BodyState, "body_state", qos)
+        self._diagnostics = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        self.create_subscription(BodyMeasurement, "body_measurement", self._on_measurement, qos)
+        self.create_timer(period, self._report)
+        self._deltas = CounterDeltas()
+        self._process_time_max = 0.0
+        self._last_z_dot_std = math.nan
+        s = config.estimator
+        self.get_logger().info(
+            f"constant-acceleration filters sigma_w {s.vertical_process_noise:g} (z) / "
+            f"{s.horizontal_process_noise:g} (y) m s^-2.5, measurement noise '{s.measurement_noise}', "
+            f"gate {s.outlier_gate:g} sigma")
+
+    def _on_measurement(self, msg: BodyMeasurement) -> None:
+        started = time.perf_counter()
+        state_msg = self._state_msg
+        for estimate in self.estimator.update(measurement_from_msg(msg)):
+            self._states.publish(fill_body_state(state_msg, estimate))
+            self._last_z_dot_std = estimate.z_dot_std
+        elapsed = time.perf_counter() - started
+        if elapsed > self._process_time_max:
+            self._process_time_max = elapsed
+
+    def _report(self) -> None:
+        now = time.time()
+        counters = dict(self.estimator.counters)
+        deltas, elapsed = self._deltas.update(counters, now)
+        values = {
+            "sample_rate_hz": deltas["measurements"] / elapsed if elapsed > 0 else math.nan,
+            "clock_offset_s": self.estimator.clock.offset,
+            "z_dot_std_m_per_s": self._last_z_dot_std,
+            "process_time_max_s": self._process_time_max,
+        }
+        self._process_time_max = 0.0
+        problem = self.estimator.last_problem if any_of(deltas, PROBLEM_COUNTERS) else ""
+        self._diagnostics.publish(diagnostics_msg(self.get_fully_qualified_name(), now, counters, values, problem))
+
+
+def main(args=None) -> int:
+    return run_node(StateEstimatorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

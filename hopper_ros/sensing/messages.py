@@ -1,0 +1,153 @@
+"""Our messages <-> the sensing modules' dataclasses, for the three nodes (and their tests).
+
+Imports the generated hopper_ros.msg classes: use it where ROS is available. Stamps are host
+time in seconds on the module side and builtin_interfaces/Time on the message side.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Mapping, Sequence
+
+from builtin_interfaces.msg import Time as TimeMsg
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from hopper_ros.msg import ApexState, BodyMeasurement, BodyState, EncoderSample, GaitEvent, NodeDiagnostics
+
+from .bridge import BridgeSample
+from .samples import DetectedEvent, Estimate, Measurement
+
+
+def sample_qos(depth: int) -> QoSProfile:
+    """QoS of the 1 kHz sample topics: reliable, the last `depth` samples (config: queue_depth)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def to_time(seconds: float, stamp: TimeMsg | None = None) -> TimeMsg:
+    """Host time [s] as a message stamp (filled in place when `stamp` is given)."""
+    nanoseconds = int(round(seconds * 1e9))
+    stamp = stamp if stamp is not None else TimeMsg()
+    stamp.sec, stamp.nanosec = divmod(nanoseconds, 1_000_000_000)
+    return stamp
+
+
+def to_seconds(stamp: TimeMsg) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+# ---------------------------------------------------------------------- encoder bridge
+def fill_encoder_sample(msg: EncoderSample, sample: BridgeSample) -> EncoderSample:
+    packet = sample.packet
+    to_time(sample.receive_time, msg.header.stamp)
+    msg.header.frame_id = "boom"
+    msg.format_version = packet.version
+    msg.sequence = packet.sequence
+    msg.mcu_time_us = packet.mcu_time_us
+    msg.azimuth_counts = packet.azimuth_counts
+    msg.elevation_counts = packet.elevation_counts
+    msg.motor_counts = packet.motor_counts
+    msg.motor_current = sample.motor_current
+    return msg
+
+
+def fill_body_measurement(msg: BodyMeasurement, sample: BridgeSample) -> BodyMeasurement:
+    position = sample.position
+    to_time(sample.receive_time, msg.header.stamp)
+    msg.header.frame_id = "ground"
+    msg.sequence = sample.packet.sequence
+    msg.mcu_time = sample.mcu_time
+    msg.boom_azimuth = position.boom_azimuth
+    msg.boom_elevation = position.boom_elevation
+    msg.y, msg.z, msg.leg_angle = position.y, position.z, position.leg_angle
+    msg.motor_current = sample.motor_current
+    msg.hip_torque = sample.hip_torque
+    return msg
+
+
+def measurement_from_msg(msg: BodyMeasurement) -> Measurement:
+    return Measurement(msg.sequence, msg.mcu_time, to_seconds(msg.header.stamp), msg.y, msg.z, msg.leg_angle)
+
+
+# ---------------------------------------------------------------------- state estimator
+def fill_body_state(msg: BodyState, estimate: Estimate) -> BodyState:
+    to_time(estimate.stamp, msg.header.stamp)
+    msg.header.frame_id = "ground"
+    msg.sequence = estimate.sequence
+    msg.y, msg.z, msg.y_dot, msg.z_dot = estimate.y, estimate.z, estimate.y_dot, estimate.z_dot
+    msg.y_ddot, msg.z_ddot = estimate.y_ddot, estimate.z_ddot
+    msg.leg_angle, msg.leg_angle_rate = estimate.leg_angle, estimate.leg_angle_rate
+    msg.covariance_diagonal = list(estimate.variances)
+    msg.measurement_used = estimate.measurement_used
+    msg.outlier_rejected = estimate.outlier_rejected
+    return msg
+
+
+def estimate_from_msg(msg: BodyState) -> Estimate:
+    """The estimate a BodyState carries; mcu_time is not on the topic and set to the stamp."""
+    stamp = to_seconds(msg.header.stamp)
+    return Estimate(msg.sequence, stamp, stamp, msg.y, msg.z, msg.y_dot, msg.z_dot, msg.y_ddot, msg.z_ddot,
+                    msg.leg_angle, msg.leg_angle_rate, tuple(msg.covariance_diagonal), msg.measurement_used,
+                    msg.outlier_rejected)
+
+
+# ---------------------------------------------------------------------- event detector
+def gait_event_msg(event: DetectedEvent, detection_delay: float) -> GaitEvent:
+    msg = GaitEvent()
+    to_time(event.time, msg.header.stamp)
+    msg.header.frame_id = "ground"
+    msg.type = int(event.kind)
+    msg.stride_index = event.stride_index
+    msg.detection_delay = detection_delay
+    fill_body_state(msg.state, event.state)
+    return msg
+
+
+def apex_state_msg(event: DetectedEvent) -> ApexState:
+    msg = ApexState()
+    to_time(event.time, msg.header.stamp)
+    msg.header.frame_id = "ground"
+    msg.stride_index = event.stride_index
+    msg.apex_height = event.state.z
+    msg.forward_speed = event.state.y_dot
+    msg.y = event.state.y
+    msg.leg_angle = event.state.leg_angle
+    return msg
+
+
+# ---------------------------------------------------------------------- diagnostics
+def diagnostics_msg(node_name: str, stamp_seconds: float, counters: Mapping[str, int],
+                    values: Mapping[str, float], problem: str = "", level: int | None = None) -> NodeDiagnostics:
+    msg = NodeDiagnostics()
+    to_time(stamp_seconds, msg.header.stamp)
+    msg.node_name = node_name
+    msg.level = level if level is not None else (NodeDiagnostics.WARN if problem else NodeDiagnostics.OK)
+    msg.message = problem
+    msg.counter_names = list(counters)
+    msg.counter_values = [int(v) for v in counters.values()]
+    msg.value_names = list(values)
+    msg.values = [float(v) if v is not None else math.nan for v in values.values()]
+    return msg
+
+
+def diagnostics_dict(msg: NodeDiagnostics) -> tuple[dict[str, int], dict[str, float]]:
+    """(counters, values) of a NodeDiagnostics message."""
+    return dict(zip(msg.counter_names, msg.counter_values)), dict(zip(msg.value_names, msg.values))
+
+
+class CounterDeltas:
+    """Counter changes since the last report, for per-period rates and "new problem" levels."""
+
+    def __init__(self) -> None:
+        self._last: dict[str, int] = {}
+        self._time: float | None = None
+
+    def update(self, counters: Mapping[str, int], now: float) -> tuple[dict[str, int], float]:
+        """(changes per counter, seconds since the last call; NaN the first time)."""
+        deltas = {name: value - self._last.get(name, 0) for name, value in counters.items()}
+        elapsed = now - self._time if self._time is not None else math.nan
+        self._last, self._time = dict(counters), now
+        return deltas, elapsed
+
+
+def any_of(deltas: Mapping[str, int], names: Sequence[str]) -> bool:
+    return any(deltas.get(name, 0) for name in names)
