@@ -273,6 +273,8 @@ class Plant:
             self.events.append(self._event("touchdown", self.t, s))
             self.phase = Phase.COMPRESSION
             self._stance_angles()
+            if self._leg_force(self.t, s, torque) <= 0.0:   # landing with the leg extending: the toe scuffs off
+                self._switch("liftoff", torque)
         elif kind == "bottom":
             self.events.append(self._event("bottom", self.t, s))
             self.phase = Phase.DECOMPRESSION
