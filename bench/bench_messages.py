@@ -10,11 +10,12 @@ Figures: msg_roundtrip_p50_us, msg_roundtrip_p99_us, msg_roundtrip_max_us,
 msg_roundtrip_lost, msg_publish_rate_hz.
 """
 import json
-import math
 import os
 import subprocess
 import sys
 import time
+
+from _common import child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 COUNT = 2000          # measured messages
 QUICK_COUNT = 500
@@ -23,18 +24,8 @@ RATE_HZ = 1000.0
 MATCH_TIMEOUT_S = 30.0
 
 
-def _env():
-    env = dict(os.environ)
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    return env
 
 
-def _percentile(sorted_values, fraction):
-    """Nearest-rank percentile of an ascending list."""
-    if not sorted_values:
-        return float("nan")
-    rank = min(max(1, math.ceil(fraction * len(sorted_values))), len(sorted_values))
-    return sorted_values[rank - 1]
 
 
 def run(quick=False):
@@ -44,13 +35,13 @@ def run(quick=False):
     me = os.path.abspath(__file__)
     subscriber = subprocess.Popen(
         [sys.executable, me, "subscribe", topic, str(total), str(WARMUP)],
-        stdout=subprocess.PIPE, text=True, env=_env())
+        stdout=subprocess.PIPE, text=True, env=child_env())
     try:
         if subscriber.stdout.readline().strip() != "ready":
             raise RuntimeError("subscriber did not start")
         publisher = subprocess.run(
             [sys.executable, me, "publish", topic, str(total), str(RATE_HZ)],
-            stdout=subprocess.PIPE, text=True, env=_env(),
+            stdout=subprocess.PIPE, text=True, env=child_env(),
             timeout=MATCH_TIMEOUT_S + total / RATE_HZ + 30.0, check=True)
         out, _ = subscriber.communicate(timeout=30.0)
     finally:
@@ -65,9 +56,9 @@ def run(quick=False):
     if not latencies_us:
         raise RuntimeError("no message received")
     return [
-        {"name": "msg_roundtrip_p50_us", "value": round(_percentile(latencies_us, 0.50), 1),
+        {"name": "msg_roundtrip_p50_us", "value": round(percentile(latencies_us, 0.50), 1),
          "unit": "us"},
-        {"name": "msg_roundtrip_p99_us", "value": round(_percentile(latencies_us, 0.99), 1),
+        {"name": "msg_roundtrip_p99_us", "value": round(percentile(latencies_us, 0.99), 1),
          "unit": "us"},
         {"name": "msg_roundtrip_max_us", "value": round(latencies_us[-1], 1), "unit": "us"},
         {"name": "msg_roundtrip_lost", "value": count - len(latencies_us), "unit": "msgs"},

@@ -16,7 +16,6 @@ motor_cmd_publish_rate_hz. A command counts as superseded when a newer one reach
 first (the driver keeps only the latest: stale setpoints are not sent).
 """
 import json
-import math
 import os
 import struct
 import subprocess
@@ -24,6 +23,8 @@ import sys
 import threading
 import time
 from pathlib import Path
+
+from _common import child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -37,18 +38,8 @@ BASE_MA = 1000          # command k asks for BASE_MA + k % SPAN_MA milliamps
 SPAN_MA = 8000
 
 
-def _env():
-    env = dict(os.environ)
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    env["PYTHONPATH"] = os.pathsep.join([str(REPO)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
-    return env
 
 
-def _percentile(sorted_values, fraction):
-    if not sorted_values:
-        return float("nan")
-    rank = min(max(1, math.ceil(fraction * len(sorted_values))), len(sorted_values))
-    return sorted_values[rank - 1]
 
 
 def _torque_for(sequence, hardware):
@@ -96,12 +87,12 @@ def run(quick=False):
         [sys.executable, "-m", "hopper_ros.cli", "run", "motor_driver", "--ros-args",
          "-r", f"__ns:={namespace}", "-p", "interface:=socketcand", "-p", "host:=127.0.0.1",
          "-p", f"port:={hub.port}"],
-        cwd=REPO, env=_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        cwd=REPO, env=child_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         publisher = subprocess.run(
             [sys.executable, os.path.abspath(__file__), "publish", f"{namespace}/motor_command", str(total),
              str(RATE_HZ)],
-            stdout=subprocess.PIPE, text=True, env=_env(), cwd=REPO,
+            stdout=subprocess.PIPE, text=True, env=child_env(), cwd=REPO,
             timeout=MATCH_TIMEOUT_S + total / RATE_HZ + 30.0, check=True)
         time.sleep(0.3)                               # the watchdog acts 20 ms after the last command
     finally:
@@ -135,8 +126,8 @@ def run(quick=False):
     if not latencies_us or stop_frame is None:
         raise RuntimeError(f"no command reached the bus or no stop frame; node log:\n{node_log[-3000:]}")
     return [
-        {"name": "motor_cmd_to_frame_p50_us", "value": round(_percentile(latencies_us, 0.50), 1), "unit": "us"},
-        {"name": "motor_cmd_to_frame_p99_us", "value": round(_percentile(latencies_us, 0.99), 1), "unit": "us"},
+        {"name": "motor_cmd_to_frame_p50_us", "value": round(percentile(latencies_us, 0.50), 1), "unit": "us"},
+        {"name": "motor_cmd_to_frame_p99_us", "value": round(percentile(latencies_us, 0.99), 1), "unit": "us"},
         {"name": "motor_cmd_to_frame_max_us", "value": round(latencies_us[-1], 1), "unit": "us"},
         {"name": "motor_cmd_superseded", "value": lost, "unit": "msgs"},
         {"name": "motor_cmd_publish_rate_hz", "value": round(sent["rate_hz"], 1), "unit": "Hz"},

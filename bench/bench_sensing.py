@@ -23,13 +23,14 @@ executor: packet_to_event_p50_us_single_executor, _p99_us_single_executor,
 deadline_miss_pct_single_executor.
 """
 import json
-import math
 import os
 import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from _common import child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -45,19 +46,8 @@ START_TIMEOUT_S = 60.0
 NODES = ("encoder_bridge", "state_estimator", "event_detector")
 
 
-def _env():
-    env = dict(os.environ)
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    env["PYTHONPATH"] = os.pathsep.join([str(REPO)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
-    env["PYTHONUNBUFFERED"] = "1"
-    return env
 
 
-def _percentile(sorted_values, fraction):
-    if not sorted_values:
-        return float("nan")
-    rank = min(max(1, math.ceil(fraction * len(sorted_values))), len(sorted_values))
-    return sorted_values[rank - 1]
 
 
 def _packets(duration, seed=3):
@@ -115,7 +105,7 @@ def latency(duration, executor="events"):
     events executor (its default) or, with executor="single", HOPPER_EXECUTOR=single."""
     namespace = f"/bench_sensing_{os.getpid()}_{executor}"
     port = _free_port()
-    env = _env()
+    env = child_env(unbuffered=True)
     env["HOPPER_EXECUTOR"] = executor
     me = os.path.abspath(__file__)
     nodes = []
@@ -238,19 +228,19 @@ def run(quick=False):
         {"name": "bridge_sample_us", "value": round(costs["bridge_sample_us"], 1), "unit": "us"},
         {"name": "estimator_sample_us", "value": round(costs["estimator_sample_us"], 1), "unit": "us"},
         {"name": "detector_sample_us", "value": round(costs["detector_sample_us"], 1), "unit": "us"},
-        {"name": "packet_to_event_p50_us", "value": round(_percentile(events, 0.50), 1), "unit": "us"},
-        {"name": "packet_to_event_p99_us", "value": round(_percentile(events, 0.99), 1), "unit": "us"},
+        {"name": "packet_to_event_p50_us", "value": round(percentile(events, 0.50), 1), "unit": "us"},
+        {"name": "packet_to_event_p99_us", "value": round(percentile(events, 0.99), 1), "unit": "us"},
         {"name": "packet_to_event_max_us", "value": round(events[-1], 1), "unit": "us"},
-        {"name": "packet_to_state_p50_us", "value": round(_percentile(states, 0.50), 1), "unit": "us"},
-        {"name": "packet_to_state_p99_us", "value": round(_percentile(states, 0.99), 1), "unit": "us"},
+        {"name": "packet_to_state_p50_us", "value": round(percentile(states, 0.50), 1), "unit": "us"},
+        {"name": "packet_to_state_p99_us", "value": round(percentile(states, 0.99), 1), "unit": "us"},
         {"name": "deadline_miss_pct", "value": round(result["deadline_miss_pct"], 3), "unit": "%"},
         {"name": "events_measured", "value": len(events), "unit": "events"},
         {"name": "sensing_source_rate_hz", "value": round(result["rate_hz"], 1), "unit": "Hz"},
         # the same with HOPPER_EXECUTOR=single (rclpy's SingleThreadedExecutor in run_node)
         {"name": "packet_to_event_p50_us_single_executor",
-         "value": round(_percentile(variant["event_latency"], 0.50), 1), "unit": "us"},
+         "value": round(percentile(variant["event_latency"], 0.50), 1), "unit": "us"},
         {"name": "packet_to_event_p99_us_single_executor",
-         "value": round(_percentile(variant["event_latency"], 0.99), 1), "unit": "us"},
+         "value": round(percentile(variant["event_latency"], 0.99), 1), "unit": "us"},
         {"name": "deadline_miss_pct_single_executor", "value": round(variant["deadline_miss_pct"], 3), "unit": "%"},
     ]
 

@@ -61,11 +61,8 @@ def test_node_streams_packets_force_plate_and_true_events(rclpy_session, hopper_
     test_node.create_subscription(GaitEvent, "sim/events", got["events"].append, 100)
     test_node.create_subscription(NodeDiagnostics, "diagnostics", got["diagnostics"].append, 10)
     try:
-        started = time.monotonic()
         packets = [packet_format.decode(data) for data in receive_packets(udp, 1500)]
-        elapsed = time.monotonic() - started
-        assert len(packets) == 1500
-        assert elapsed > 1.2                        # real time: 1500 periods take 1.5 s
+        assert len(packets) == 1500                 # pacing (real-time factor 1): bench sim_realtime_mode_factor
         sequences = np.array([p.sequence for p in packets])
         assert (np.diff(sequences) == 1).mean() > 0.999   # loopback UDP loses nothing in practice
         clock = np.array([p.mcu_time_us for p in packets])
@@ -82,7 +79,7 @@ def test_node_streams_packets_force_plate_and_true_events(rclpy_session, hopper_
         assert stance_force > 50.0                  # the robot landed on the plate
         report = got["diagnostics"][-1]
         assert report.node_name == "/sim_robot" and "periods" in report.counter_names
-        assert 0.8 < report.values[list(report.value_names).index("realtime_factor")] < 1.2
+        assert "realtime_factor" in report.value_names
     finally:
         node.signal(signal.SIGINT)
         assert node.wait() == 0
@@ -91,16 +88,14 @@ def test_node_streams_packets_force_plate_and_true_events(rclpy_session, hopper_
         udp.close()
 
 
-def test_lockstep_runs_faster_than_real_time_and_ends_after_its_duration(hopper_cli):
+def test_lockstep_ends_after_its_duration_with_every_period_sent(hopper_cli):
     udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     udp.bind(("127.0.0.1", 0))
     udp.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
     node = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=none", "-p", "mode:=lockstep",
                       "-p", "duration:=3.0", "-p", f"udp_port:={udp.getsockname()[1]}")
     node.wait_for_line(r"lockstep at 1000 Hz")
-    started = time.monotonic()
-    node.wait_for_line(r"simulated 3\.000 s: done")
-    assert time.monotonic() - started < 3.0 / 2     # at least twice real time even on a busy machine
+    node.wait_for_line(r"simulated 3\.000 s: done")    # how fast: bench sim_realtime_factor
     assert node.wait() == 0                         # ends by itself
     packets = receive_packets(udp, 3000, timeout=5.0)
     assert len(packets) >= 2500                     # the socket buffer may drop a few at full speed

@@ -24,7 +24,8 @@ from hopper_ros.sensing.samples import EventType
 from hopper_ros.sim.robot import SimRobot
 
 from .deadbeat import DeadbeatController, StrideDecision
-from .stride_machine import StrideMachine, StridePlan
+from .closed_loop import decide_at_apex
+from .stride_machine import StrideMachine
 
 _CHANNELS = iter(range(1 << 30))
 
@@ -87,13 +88,8 @@ class GraphLockstep:
             self.controller.observe(state.z, state.y_dot)
             if self.setpoint is None:
                 return
-            first = self.controller.first_decision(state.z, state.y_dot, *self.setpoint, event.stride_index)
-            self.machine.on_apex(StridePlan(first.tau_0, first.touchdown_angle, first.ramp_duration)
-                                 if first.feasible else None, first.reason)
-            decision = self.controller.refine(first, state.z, state.y_dot)
-            if decision.feasible and decision is not first:
-                self.machine.revise(StridePlan(decision.tau_0, decision.touchdown_angle, decision.ramp_duration))
-            run.decisions.append(decision)
+            run.decisions.append(decide_at_apex(self.controller, self.machine, state.z, state.y_dot, self.setpoint,
+                                                event.stride_index))
         elif event.kind is EventType.PRE_TOUCHDOWN:
             self.machine.on_pre_touchdown()
         elif event.kind is EventType.TOUCHDOWN:

@@ -34,6 +34,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from hopper_ros.config import load_yaml
+from hopper_ros.control.closed_loop import decide_at_apex
 from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings, StrideDecision
 from hopper_ros.control.stride_machine import Phase, StrideMachine, StridePlan
 from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorCommand, NodeDiagnostics, StrideCommand
@@ -112,25 +113,14 @@ class DeadbeatControllerNode(Node):
         self.controller.observe(msg.apex_height, msg.forward_speed)
         if self.setpoint is None:
             return
-        first = self.controller.first_decision(msg.apex_height, msg.forward_speed, *self.setpoint, msg.stride_index)
-        self._take(first)                                   # the leg starts moving now
-        decision = self.controller.refine(first, msg.apex_height, msg.forward_speed)
-        if decision is not first and decision.feasible:     # the stride's inputs, ~1 ms later
-            self.machine.revise(StridePlan(decision.tau_0, decision.touchdown_angle, decision.ramp_duration))
+        decision = decide_at_apex(self.controller, self.machine, msg.apex_height, msg.forward_speed, self.setpoint,
+                                  msg.stride_index)
         self.last_decision = decision
         self.counters["strides"] += 1
         if not decision.feasible:
             self.counters["infeasible"] += 1
             self.get_logger().warning(f"stride {msg.stride_index}: infeasible ({decision.reason}); leg held, no torque")
         self._publish_decision(decision)
-
-    def _take(self, decision: StrideDecision) -> None:
-        if decision.feasible:
-            self.machine.on_apex(StridePlan(decision.tau_0, decision.touchdown_angle, decision.ramp_duration),
-                                 decision.reason)
-        else:
-            self.machine.on_apex(None, decision.reason)
-            self.machine.hold_angle = decision.touchdown_angle
 
     def _single_stride_apex(self, msg: ApexState) -> None:
         if self.machine.phase is Phase.INITIALISE:

@@ -135,7 +135,7 @@ class ExperimentSeries:
         apex_height, forward_speed, touchdown_angle, tau_0, ramp = self._draws.pop(0)
         robot = self.robot
         robot.throw(apex_height, forward_speed, touchdown_angle, y=robot.plant.state[0])
-        experiment = StrideExperiment(tau_0, touchdown_angle, ramp, PositionRegulator.from_hardware(robot.hardware),
+        experiment = StrideExperiment(tau_0, touchdown_angle, ramp, drive_hold(robot.hardware),
                                       robot.config.pre_touchdown_height)
         robot.run_experiment(experiment)
         self.started += 1
