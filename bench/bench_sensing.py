@@ -140,9 +140,11 @@ def latency(duration, executor="events"):
     measured = [s for s in send_ns if s >= first_measured]
     states = {int(k): v for k, v in received["states"].items()}
     state_latency = sorted((states[s] - send_ns[s]) / 1e3 for s in measured if s in states)
+    measurements = {int(k): v for k, v in received["measurements"].items()}
+    measurement_latency = sorted((measurements[s] - send_ns[s]) / 1e3 for s in measured if s in measurements)
     misses = sum(1 for s in measured if s not in states or states[s] - send_ns[s] > PERIOD_S * 1e9)
     event_latency = sorted((t - send_ns[s]) / 1e3 for s, t in received["events"] if s in send_ns and s >= first_measured)
-    return {"event_latency": event_latency, "state_latency": state_latency,
+    return {"event_latency": event_latency, "state_latency": state_latency, "measurement_latency": measurement_latency,
             "deadline_miss_pct": 100.0 * misses / len(measured), "rate_hz": sent["rate_hz"]}
 
 
@@ -173,12 +175,12 @@ def _sink(namespace, duration):
     from rclpy.experimental import EventsExecutor
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    from hopper_ros.msg import BodyState, GaitEvent
+    from hopper_ros.msg import BodyMeasurement, BodyState, GaitEvent
 
     rclpy.init()
     node = rclpy.create_node("bench_sensing_sink", namespace=namespace, start_parameter_services=False)
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-    states, events = {}, []
+    states, measurements, events = {}, {}, []
     last = [time.monotonic()]
 
     def on_state(msg):
@@ -187,11 +189,15 @@ def _sink(namespace, duration):
             states.setdefault(msg.sequence, now)
         last[0] = time.monotonic()
 
+    def on_measurement(msg):
+        measurements.setdefault(msg.sequence, time.monotonic_ns())
+
     def on_event(msg):
         events.append((msg.state.sequence, time.monotonic_ns()))
 
     node.create_subscription(BodyState, "body_state", on_state, qos)
     node.create_subscription(GaitEvent, "gait_event", on_event, qos)
+    node.create_subscription(BodyMeasurement, "body_measurement", on_measurement, qos)
     executor = EventsExecutor()
     executor.add_node(node)
     deadline = time.monotonic() + START_TIMEOUT_S
@@ -211,7 +217,7 @@ def _sink(namespace, duration):
         started = started or bool(states)
         if started and time.monotonic() - last[0] > 3.0:
             break                                # the source is done and nothing came for a while
-    print(json.dumps({"states": states, "events": events}), flush=True)
+    print(json.dumps({"states": states, "measurements": measurements, "events": events}), flush=True)
     executor.shutdown()
     node.destroy_node()
     rclpy.shutdown()
@@ -233,6 +239,10 @@ def run(quick=False):
         {"name": "packet_to_event_max_us", "value": round(events[-1], 1), "unit": "us"},
         {"name": "packet_to_state_p50_us", "value": round(percentile(states, 0.50), 1), "unit": "us"},
         {"name": "packet_to_state_p99_us", "value": round(percentile(states, 0.99), 1), "unit": "us"},
+        {"name": "packet_to_measurement_p50_us",
+         "value": round(percentile(result["measurement_latency"], 0.50), 1), "unit": "us"},
+        {"name": "packet_to_measurement_p99_us",
+         "value": round(percentile(result["measurement_latency"], 0.99), 1), "unit": "us"},
         {"name": "deadline_miss_pct", "value": round(result["deadline_miss_pct"], 3), "unit": "%"},
         {"name": "events_measured", "value": len(events), "unit": "events"},
         {"name": "sensing_source_rate_hz", "value": round(result["rate_hz"], 1), "unit": "Hz"},

@@ -248,10 +248,6 @@ def test_nodes_find_every_event_of_the_simulated_robot_within_2_ms(rclpy_session
     assert estimator["measurements"] == 8000
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "open defect (issue 5): on a loaded two-core machine this stream of bad packets, sent at 1 kHz from "
-    "this process, once made the detector publish an apex 88 ms early (a fresh-clone run of the suite); "
-    "it passes when the machine is idle"))
 def test_bad_packets_are_counted_dropped_and_never_change_an_event(rclpy_session, hopper_cli, tmp_path):
     """Packets from this test (a recorded SimRobot run) with garbage, truncated, bit-flipped, other-version,
     duplicated, swapped, clock-backwards packets and gaps mixed in, counters homed near the 32-bit wrap

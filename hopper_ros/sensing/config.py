@@ -72,6 +72,7 @@ class EstimatorSettings:
     max_prediction_gap: float         # [s]
     clock_drift_rate: float           # [s/s]
     clock_max_error: float            # [s]
+    clock_reanchor_after: float       # [s] of microcontroller time
 
     def __post_init__(self) -> None:
         if self.measurement_noise not in MEASUREMENT_NOISE_MODELS:
@@ -98,6 +99,7 @@ class DetectorSettings:
     acquire_window: float         # [s]
     acquire_velocity_std: float   # [m/s]
     track_velocity_std: float     # [m/s]
+    max_state_spacing: float      # [s]
 
     def __post_init__(self) -> None:
         if not 0 < self.acquire_velocity_std <= self.track_velocity_std:

@@ -36,7 +36,8 @@ predict and one update call per sample). Update in Joseph form, A.1.2 line 11 (f
   (the robot was moved by hand, the simulator threw it) restart the filter from the measurement.
 
 Host stamps: the state's instant on the host clock is mcu_time + offset, the offset following the
-lower envelope of (receive time - mcu time) by at most `clock_drift_rate` (`ClockOffset`).
+lower envelope of (receive time - mcu time) by at most `clock_drift_rate`, re-anchored only after
+`clock_reanchor_after` seconds of packets all later than `clock_max_error` (`ClockOffset`).
 """
 
 from __future__ import annotations
@@ -86,31 +87,51 @@ class ClockOffset:
     `envelope` drops at once to a smaller (receive - mcu time) and otherwise rises by at most
     `max_drift_rate` seconds per second. The offset used for the stamps follows the envelope at
     that rate, up or down: stamp differences equal the microcontroller's to within the rate (the
-    event detector's flight fit relies on it). Only a packet delayed by more than `max_error` beyond
-    the offset (the microcontroller restarted, the host clock stepped forward) re-anchors it at
-    once (`anchors`). Faster than real time (a lockstep simulation) the stamps run ahead of the host
-    clock instead of being compressed.
+    event detector's flight fit relies on it). Only when every packet for `reanchor_after` seconds
+    of microcontroller time arrived more than `max_error` later than the offset says (the host
+    clock stepped forward, the stream runs slower than real time) is the offset re-anchored, to the
+    least delay of that span (`anchors`). A host that stalls for less (the bridge descheduled for
+    0.15 s, its packets then read in a burst) delays packets without moving the stamps: anchoring
+    on the first late packet shifted every later stamp by the stall, and a flight then looked 0.1 s
+    older than it was (an apex published 88 ms early, seen under load). Faster than real time (a
+    lockstep simulation) the stamps run ahead of the host clock instead of being compressed.
     """
 
-    def __init__(self, max_drift_rate: float, max_error: float) -> None:
+    def __init__(self, max_drift_rate: float, max_error: float, reanchor_after: float) -> None:
         self.max_drift_rate = max_drift_rate
         self.max_error = max_error
+        self.reanchor_after = reanchor_after
         self.offset = 0.0
         self.envelope = 0.0
         self.anchors = 0
         self._last_mcu: float | None = None
+        self._late_since: float | None = None    # mcu time of the first packet of an unbroken late span
+        self._late_least = math.inf              # its least delay
 
     def update(self, mcu_time: float, receive_time: float) -> float:
         delay = receive_time - mcu_time
-        if self._last_mcu is None or delay - self.offset > self.max_error:
-            self.offset = self.envelope = delay
-            self.anchors += 1
+        if self._last_mcu is None:
+            self._anchor(delay)
         else:
-            step = self.max_drift_rate * max(0.0, mcu_time - self._last_mcu)
-            self.envelope = min(self.envelope + step, delay)
-            self.offset += max(-step, min(step, self.envelope - self.offset))
+            if delay - self.offset > self.max_error:
+                if self._late_since is None:
+                    self._late_since, self._late_least = mcu_time, delay
+                self._late_least = min(self._late_least, delay)
+            else:
+                self._late_since = None
+            if self._late_since is not None and mcu_time - self._late_since >= self.reanchor_after:
+                self._anchor(self._late_least)
+            else:
+                step = self.max_drift_rate * max(0.0, mcu_time - self._last_mcu)
+                self.envelope = min(self.envelope + step, delay)
+                self.offset += max(-step, min(step, self.envelope - self.offset))
         self._last_mcu = mcu_time
         return self.offset
+
+    def _anchor(self, delay: float) -> None:
+        self.offset = self.envelope = delay
+        self.anchors += 1
+        self._late_since = None
 
     def reset(self) -> None:
         self._last_mcu = None
@@ -143,7 +164,8 @@ class StateEstimator:
         # The axes are independent (P block-diagonal), so S = H P H' + R is diagonal: invert it as such.
         self.kf.inv = _diagonal_inverse
         self._row_sets = {}   # accepted-axes mask -> (H, R) of those rows
-        self.clock = ClockOffset(settings.clock_drift_rate, settings.clock_max_error)
+        self.clock = ClockOffset(settings.clock_drift_rate, settings.clock_max_error,
+                                 settings.clock_reanchor_after)
         self.counters = dict.fromkeys(COUNTER_NAMES, 0)
         self.last_problem = ""
         self.initialised = False

@@ -48,6 +48,11 @@ direction of its z' (a robot held still never qualifies, and an apex is never gu
 robot that may already be past it). A flight fit that misses the estimated heights by more than
 `flight_fit_max_residual` (RMS) is no ballistic flight: the track is lost.
 
+Time: every guard and fit runs on the states' host stamps, which keep the microcontroller's
+spacing (the estimator's clock mapping). Two states closer than zero or further apart than
+`max_state_spacing` mean the stamps jumped (the mapping re-anchored, the host clock stepped): the
+track is lost rather than a flight being timed across the jump.
+
 Hysteresis: a flight counts (touchdown and apex armed) once the toe has risen
 `touchdown_arming_clearance` above the ground since the lift-off, a stance (lift-off armed) once
 the lift-off guard has been positive; a flight or contact that never gets there loses the track
@@ -265,9 +270,12 @@ class EventDetector:
             self._lose_track(f"estimate not trusted at sample {e.sequence}")
             self._previous = None
             return []
-        if self._previous is not None and e.stamp <= self._previous.stamp:
-            self._lose_track(f"sample {e.sequence} is not later than the last one (host clock stepped?)")
-            self._previous = None
+        if self._previous is not None:
+            spacing = e.stamp - self._previous.stamp
+            if not 0.0 < spacing <= self.settings.max_state_spacing:
+                self._lose_track(f"sample {e.sequence} is {spacing * 1e3:.3f} ms after the last one "
+                                 f"(stamps jumped: host clock stepped or its mapping re-anchored)")
+                self._previous = None
         events: list[DetectedEvent] = []
         if e.outlier_rejected:
             # A measurement failed the gate: no guard is evaluated on it. Only an apex that the
