@@ -13,7 +13,6 @@ import threading
 import time
 
 import numpy as np
-import pytest
 import yaml
 
 from conftest import SAFETY_TIMEOUT, free_port, spin_until
@@ -25,7 +24,6 @@ from hopper_ros.sensing.evaluation import (MCU_CLOCK_OFFSET, inject_faults, matc
                                            record_experiments, toe_heights, true_events)
 from hopper_ros.sensing.samples import EventType
 from hopper_ros.sim.config import load_sim_config
-from hopper_ros.sim.experiment import ExperimentSeries
 from hopper_ros.sim.plant import PlantEvent
 from hopper_ros.sim.robot import SimRobot
 
