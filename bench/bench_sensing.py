@@ -143,8 +143,12 @@ def latency(duration, executor="events"):
     measurements = {int(k): v for k, v in received["measurements"].items()}
     measurement_latency = sorted((measurements[s] - send_ns[s]) / 1e3 for s in measured if s in measurements)
     misses = sum(1 for s in measured if s not in states or states[s] - send_ns[s] > PERIOD_S * 1e9)
-    event_latency = sorted((t - send_ns[s]) / 1e3 for s, t in received["events"] if s in send_ns and s >= first_measured)
-    return {"event_latency": event_latency, "state_latency": state_latency, "measurement_latency": measurement_latency,
+    send_wall_ns = {int(k): v for k, v in sent["send_wall_ns"].items()}
+    events = [(s, t, p) for s, t, p in received["events"] if s in send_ns and s >= first_measured]
+    event_latency = sorted((p - send_wall_ns[s]) / 1e3 for s, _, p in events)
+    event_received_latency = sorted((t - send_ns[s]) / 1e3 for s, t, _ in events)
+    return {"event_latency": event_latency, "event_received_latency": event_received_latency,
+            "state_latency": state_latency, "measurement_latency": measurement_latency,
             "deadline_miss_pct": 100.0 * misses / len(measured), "rate_hz": sent["rate_hz"]}
 
 
@@ -154,7 +158,7 @@ def _source(port, duration):
 
     _, packets = _packets(duration + WARMUP_S)
     datagrams = [(p.sequence, packet_format.encode(p)) for p in packets]
-    send_ns = {}
+    send_ns, send_wall_ns = {}, {}
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         address = ("127.0.0.1", port)
         start = time.monotonic_ns() + 200_000_000
@@ -163,10 +167,12 @@ def _source(port, duration):
             if left > 0:
                 time.sleep(left / 1e9)
             send_ns[sequence] = time.monotonic_ns()
+            send_wall_ns[sequence] = time.time_ns()
             sock.sendto(data, address)
         elapsed = (time.monotonic_ns() - start) / 1e9
     time.sleep(1.0)
-    print(json.dumps({"send_ns": send_ns, "rate_hz": (len(datagrams) - 1) / elapsed}), flush=True)
+    print(json.dumps({"send_ns": send_ns, "send_wall_ns": send_wall_ns, "rate_hz": (len(datagrams) - 1) / elapsed}),
+          flush=True)
 
 
 def _sink(namespace, duration):
@@ -193,7 +199,8 @@ def _sink(namespace, duration):
         measurements.setdefault(msg.sequence, time.monotonic_ns())
 
     def on_event(msg):
-        events.append((msg.state.sequence, time.monotonic_ns()))
+        published_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec + round(msg.detection_delay * 1e9)
+        events.append((msg.state.sequence, time.monotonic_ns(), published_ns))
 
     node.create_subscription(BodyState, "body_state", on_state, qos)
     node.create_subscription(GaitEvent, "gait_event", on_event, qos)
@@ -237,6 +244,10 @@ def run(quick=False):
         {"name": "packet_to_event_p50_us", "value": round(percentile(events, 0.50), 1), "unit": "us"},
         {"name": "packet_to_event_p99_us", "value": round(percentile(events, 0.99), 1), "unit": "us"},
         {"name": "packet_to_event_max_us", "value": round(events[-1], 1), "unit": "us"},
+        {"name": "packet_to_event_received_p50_us",
+         "value": round(percentile(result["event_received_latency"], 0.50), 1), "unit": "us"},
+        {"name": "packet_to_event_received_p99_us",
+         "value": round(percentile(result["event_received_latency"], 0.99), 1), "unit": "us"},
         {"name": "packet_to_state_p50_us", "value": round(percentile(states, 0.50), 1), "unit": "us"},
         {"name": "packet_to_state_p99_us", "value": round(percentile(states, 0.99), 1), "unit": "us"},
         {"name": "packet_to_measurement_p50_us",

@@ -14,6 +14,8 @@ Launch file format (YAML; example: config/launch/example.yaml):
           apex: /events/apex
         args: []                    # optional: more arguments for the node, after the above
         label: setpoints            # optional: the log prefix (default: [namespace/]name or node)
+        realtime_priority: 60       # optional: SCHED_FIFO priority 1-99 of the node's process
+                                    #   (HOPPER_REALTIME_PRIORITY; hopper_ros/environment.py)
     sigint_timeout: 5.0             # optional: seconds from SIGINT to SIGTERM when stopping (5)
     sigterm_timeout: 3.0            # optional: seconds from SIGTERM to SIGKILL (3)
 
@@ -46,11 +48,12 @@ from typing import Any, TextIO
 import yaml
 
 from hopper_ros.config import config_path
-from hopper_ros.environment import apply_ros_environment
+from hopper_ros.environment import REALTIME_PRIORITY_VAR, apply_ros_environment
 
 DEFAULT_SIGINT_TIMEOUT = 5.0
 DEFAULT_SIGTERM_TIMEOUT = 3.0
-_ENTRY_KEYS = {"node", "name", "namespace", "parameters", "params_file", "remappings", "args", "label"}
+_ENTRY_KEYS = {"node", "name", "namespace", "parameters", "params_file", "remappings", "args", "label",
+               "realtime_priority"}
 _TOP_KEYS = {"nodes", "sigint_timeout", "sigterm_timeout"}
 _READ_SIZE = 65536
 _MAX_LINE = 65536  # a longer line without newline is passed on in pieces
@@ -188,7 +191,13 @@ def parse_launch(data: Any, source: str = "<launch>", base_dir: Path | None = No
                 f"{where}: label {label!r} is already used by entry {labels[label]}; give the entries distinct names or labels"
             )
         labels[label] = index
-        children.append(ChildSpec(label, node_command(node, ros_args, [str(a) for a in extra]), env))
+        child_env = env
+        if "realtime_priority" in entry:
+            priority = entry["realtime_priority"]
+            if isinstance(priority, bool) or not isinstance(priority, int) or not 1 <= priority <= 99:
+                raise LaunchFileError(f"{where}: 'realtime_priority' must be a SCHED_FIFO priority 1-99, got {priority!r}")
+            child_env = {**env, REALTIME_PRIORITY_VAR: str(priority)}
+        children.append(ChildSpec(label, node_command(node, ros_args, [str(a) for a in extra]), child_env))
     return LaunchDescription(children, timeouts["sigint_timeout"], timeouts["sigterm_timeout"])
 
 

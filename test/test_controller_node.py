@@ -21,7 +21,7 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-    from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorCommand, StrideCommand
+    from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
 
     node_process = hopper_cli("run", "deadbeat_controller")
     node_process.wait_for_line(r"closed_loop: predictor corrected, adaptation on")
@@ -32,47 +32,41 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
     setpoint = node.create_publisher(ApexState, "apex_setpoint", latched)
     apex = node.create_publisher(ApexState, "apex", 10)
     events = node.create_publisher(GaitEvent, "gait_event", 10)
-    states = node.create_publisher(BodyState, "body_state", 10)
     commands, strides = [], []
     best_effort = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
     node.create_subscription(MotorCommand, "motor_command", commands.append, best_effort)
     node.create_subscription(StrideCommand, "stride_command", strides.append, 10)
 
-    def tick(t: float) -> MotorCommand:
+    def tick() -> MotorCommand:
+        """The next command of the stream (sent on every change, repeated every keep_alive)."""
         commands.clear()
-        states.publish(_state(t))
         assert spin_until(executor, lambda: commands, timeout=10.0)
         return commands[-1]
 
-    def _state(t):
-        message = BodyState()
-        message.header.stamp = stamp(t)
-        return message
-
     try:
-        assert spin_until(executor, lambda: apex.get_subscription_count() and states.get_subscription_count()
+        assert spin_until(executor, lambda: apex.get_subscription_count()
                           and events.get_subscription_count() and setpoint.get_subscription_count()
                           and node.count_publishers("motor_command"))
-        assert tick(9.9).mode == MotorCommand.MODE_DISABLED              # nothing to do without a setpoint
+        assert tick().mode == MotorCommand.MODE_DISABLED              # nothing to do without a setpoint
         setpoint.publish(ApexState(apex_height=0.39, forward_speed=2.0))
         spin_until(executor, lambda: False, timeout=0.3)
-        assert tick(10.0).mode == MotorCommand.MODE_POSITION             # leg held, ready for the throw
+        assert tick().mode == MotorCommand.MODE_POSITION             # leg held, ready for the throw
         apex.publish(ApexState(stride_index=3, apex_height=0.39, forward_speed=2.0))
         assert spin_until(executor, lambda: strides)
         decision = strides[-1]
         assert decision.feasible and decision.stride_index == 3 and decision.target_apex_height == 0.39
         assert 0.0 < decision.tau_0 < 12.5 and 0.2 < decision.touchdown_angle < 0.6
         assert decision.predicted_apex_height == pytest.approx(0.39, abs=2e-3)
-        flight = tick(10.05)
+        flight = tick()
         assert (flight.mode, flight.setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(decision.touchdown_angle))
         events.publish(GaitEvent(type=GaitEvent.PRE_TOUCHDOWN))
         spin_until(executor, lambda: False, timeout=0.2)
-        assert tick(10.15).setpoint == 0.0                                 # position regulator off
+        assert tick().setpoint == 0.0                                 # position regulator off
         touchdown = GaitEvent(type=GaitEvent.TOUCHDOWN)
         touchdown.header.stamp = stamp(10.2)
         events.publish(touchdown)
         spin_until(executor, lambda: False, timeout=0.2)
-        ramp = tick(10.22)                     # the driver runs the ramp, from the touchdown's stamp
+        ramp = tick()                     # the driver runs the ramp, from the touchdown's stamp
         assert (ramp.mode, ramp.setpoint, ramp.duration) == (
             MotorCommand.MODE_RAMP, pytest.approx(decision.tau_0), pytest.approx(decision.predicted_liftoff_time))
         assert (ramp.header.stamp.sec, ramp.header.stamp.nanosec) == (10, 200_000_000)
@@ -80,12 +74,12 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         liftoff.state.leg_angle = -0.31
         events.publish(liftoff)
         spin_until(executor, lambda: False, timeout=0.2)
-        assert (tick(10.3).mode, tick(10.31).setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(-0.31))
+        assert (tick().mode, tick().setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(-0.31))
 
         apex.publish(ApexState(stride_index=4, apex_height=0.12, forward_speed=2.0))   # toe in the ground
         assert spin_until(executor, lambda: len(strides) == 2)
         assert not strides[-1].feasible and "no touchdown angle" in strides[-1].reason and strides[-1].tau_0 == 0.0
-        held = tick(10.6)
+        held = tick()
         assert held.mode == MotorCommand.MODE_POSITION
     finally:
         node_process.signal(signal.SIGINT)

@@ -115,3 +115,49 @@ def test_invalid_range_stops_the_entry_point(hopper_cli):
     process = hopper_cli("topic", "list", env={DISCOVERY_RANGE_VAR: "EVERYWHERE"})
     assert process.wait() == 2
     assert "is not a discovery range" in process.stderr
+
+
+def _policies(pid: int) -> set[int]:
+    """The scheduling policy of every thread of a process (/proc/PID/task/TID/stat field 41)."""
+    policies = set()
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        stat = Path(f"/proc/{pid}/task/{tid}/stat").read_text()
+        policies.add(int(stat[stat.rfind(")") + 2:].split()[38]))
+    return policies
+
+
+@pytest.mark.parametrize("value", ["0", "100", "high"])
+def test_a_bad_realtime_priority_is_refused(value):
+    from hopper_ros.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority
+
+    env = {REALTIME_PRIORITY_VAR: value}
+    if value == "0":
+        assert apply_realtime_priority(env) == "normal scheduling"
+    else:
+        with pytest.raises(RosEnvironmentError, match="SCHED_FIFO priority 1-99"):
+            apply_realtime_priority(env)
+
+
+def test_a_node_asked_for_realtime_priority_runs_every_thread_on_sched_fifo(hopper_cli):
+    import socket
+
+    from conftest import free_port
+    from hopper_ros.environment import REALTIME_PRIORITY_VAR
+
+    rt = hopper_cli("run", "encoder_bridge", "--ros-args", "-p", f"port:={free_port(socket.SOCK_DGRAM)}",
+                    env={REALTIME_PRIORITY_VAR: "7"})
+    normal = hopper_cli("run", "encoder_bridge", "--ros-args", "-p", f"port:={free_port(socket.SOCK_DGRAM)}",
+                        unset=(REALTIME_PRIORITY_VAR,))
+    line = rt.wait_for_line(r"scheduling: (.*)").group(1)
+    normal.wait_for_line(r"scheduling: normal scheduling")
+    if "refused" in line:
+        pytest.skip(f"this machine gives no SCHED_FIFO: {line}")
+    assert "SCHED_FIFO priority 7" in line
+    rt_pid = int(rt.wait_for_line(STARTED).group(1))
+    normal_pid = int(normal.wait_for_line(STARTED).group(1))
+    assert _policies(rt_pid) == {os.SCHED_FIFO}          # the DDS threads and the UDP thread too
+    assert os.sched_getparam(rt_pid).sched_priority == 7
+    assert _policies(normal_pid) == {os.SCHED_OTHER}
+    rt.signal(signal.SIGINT)
+    normal.signal(signal.SIGINT)
+    assert rt.wait() == 0 and normal.wait() == 0

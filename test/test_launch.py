@@ -61,6 +61,14 @@ def test_entry_fields_become_ros_arguments(tmp_path):
     assert (child.label, description.sigint_timeout, description.sigterm_timeout) == ("sched", 1.0, 0.5)
 
 
+def test_realtime_priority_goes_to_that_node_only():
+    from hopper_ros.environment import REALTIME_PRIORITY_VAR
+
+    rt, normal = parse_launch({"nodes": [{"node": "encoder_bridge", "realtime_priority": 60},
+                                         {"node": "setpoint_scheduler"}]}, "t.yaml").children
+    assert rt.env[REALTIME_PRIORITY_VAR] == "60" and REALTIME_PRIORITY_VAR not in normal.env
+
+
 @pytest.mark.parametrize(
     "data, message",
     [
@@ -73,6 +81,7 @@ def test_entry_fields_become_ros_arguments(tmp_path):
         ({"nodes": [{"node": "setpoint_scheduler", "remappings": ["a:=b"]}]}, "'remappings' must be a mapping"),
         ({"nodes": []}, "non-empty 'nodes' list"),
         ({"nodes": [{"node": "setpoint_scheduler"}], "sigint_timeout": -1}, "'sigint_timeout' must be a number"),
+        ({"nodes": [{"node": "setpoint_scheduler", "realtime_priority": 100}]}, "'realtime_priority' must be a SCHED_FIFO priority 1-99"),
     ],
 )  # fmt: skip
 def test_bad_launch_files_name_the_entry(data, message):
