@@ -67,6 +67,8 @@ from hopper_ros.hardware.motor import RPM_PER_RAD_S, HipMotor
 # MotorCommand modes (the message's constants, repeated here to stay ROS-free)
 MODE_DISABLED, MODE_CURRENT, MODE_POSITION, MODE_RAMP = 0, 1, 2, 3
 MODE_NAMES = {MODE_DISABLED: "disabled", MODE_CURRENT: "current", MODE_POSITION: "position", MODE_RAMP: "ramp"}
+RAMP_RESTAMP = 0.0005   # [s] a MODE_RAMP stamp moved by more than this re-anchors the running ramp (repeats of
+                        #   one stamp differ by the command's transit jitter only)
 
 # ------------------------------------------------------------------------------- PDO layout
 
@@ -293,7 +295,7 @@ class MotorDriver:
         self._last_cw: int | None = None
         # cyclic exchange
         self._sent_since_sync: tuple[int, bytes] | None = None
-        self._ramp: tuple[float, float, float] | None = None   # MODE_RAMP: (tau_0, duration, start)
+        self._ramp: tuple[float, float, float, float] | None = None   # MODE_RAMP: (tau_0, duration, start, stamp)
         self._last_rpdo: tuple[int, bytes] | None = None   # the last RPDO sent and when
         self._last_rpdo_time = -math.inf
         self._tpdo_seen = 0                 # TPDOs received since the last SYNC (bit n-1: TPDO n)
@@ -312,9 +314,11 @@ class MotorDriver:
         """Take one motor command; False (counted, ignored) if it is invalid.
 
         MODE_RAMP: the stance ramp of (2.32), hip torque -setpoint (1 - t/duration) for t in
-        [0, duration) from `age` seconds ago (when the command was issued), then 0. The driver's
-        own 1 kHz cycle computes the current of every period, so jitter in the command stream
-        does not stretch or shift the ramp; repeats of the same ramp keep its start.
+        [0, duration) from `age` seconds ago (its stamp: the touchdown), then 0; a negative age is a
+        ramp scheduled ahead (a predicted touchdown: zero current until then). The driver's own
+        1 kHz cycle computes the current of every period, so jitter in the command stream does
+        not stretch or shift the ramp; repeats of the same ramp keep its start, and the same ramp
+        under a stamp more than RAMP_RESTAMP away (the measured touchdown) moves to that stamp.
         """
         now = self.clock()
         if mode == MODE_RAMP and not (math.isfinite(duration) and duration > 0.0 and math.isfinite(age)):
@@ -336,9 +340,15 @@ class MotorDriver:
             if mode == MODE_CURRENT:
                 self._current_ma = self._current_setting(setpoint)
             elif mode == MODE_RAMP:
+                stamp = now - age                      # the command's stamp on this clock
                 if self._ramp is None or self._ramp[:2] != (setpoint, duration):
-                    # anchored at the touchdown, unless the command came late: a ramp skipped is energy lost
-                    self._ramp = (setpoint, duration, now - min(max(0.0, age), self.settings.max_ramp_age))
+                    # anchored at its stamp (the touchdown, or one predicted ahead: zero current until
+                    # then), unless the command came late: a ramp skipped is energy lost
+                    self._ramp = (setpoint, duration, max(stamp, now - self.settings.max_ramp_age), stamp)
+                elif abs(stamp - self._ramp[3]) > RAMP_RESTAMP:
+                    # the same ramp under a new stamp (the measured touchdown after a predicted one):
+                    # the running ramp moves to it
+                    self._ramp = (setpoint, duration, stamp, stamp)
                 self._current_ma = self._current_setting(self._ramp_torque(now))
             else:
                 self._position_qc = self._position_setting(setpoint)
@@ -689,7 +699,7 @@ class MotorDriver:
         return Command.FAULT_RESET
 
     def _ramp_torque(self, now: float) -> float:
-        tau_0, duration, start = self._ramp
+        tau_0, duration, start, _ = self._ramp
         elapsed = now - start
         return -tau_0 * (1.0 - elapsed / duration) if 0.0 <= elapsed < duration else 0.0   # (2.32)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import signal
+import time
 
 import pytest
 
@@ -22,6 +23,8 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
     from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
+    from hopper_ros.physics.flight import touchdown_time
+    from hopper_ros.physics.params import load_params
 
     node_process = hopper_cli("run", "deadbeat_controller")
     node_process.wait_for_line(r"closed_loop: predictor corrected, adaptation on")
@@ -59,17 +62,30 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         assert decision.predicted_apex_height == pytest.approx(0.39, abs=2e-3)
         flight = tick()
         assert (flight.mode, flight.setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(decision.touchdown_angle))
-        events.publish(GaitEvent(type=GaitEvent.PRE_TOUCHDOWN))
+        # pre-touchdown: the ramp goes out now, stamped with the touchdown predicted from the event's state
+        pre_touchdown = GaitEvent(type=GaitEvent.PRE_TOUCHDOWN)
+        soon = time.time() + 1.0                  # host clock: a prediction in the past would be cancelled
+        pre_touchdown.header.stamp = stamp(soon)
+        state = pre_touchdown.state
+        state.z, state.z_dot, state.leg_angle, state.leg_angle_rate = 0.205 * math.cos(0.4) + 0.02, -2.3, 0.4, 0.0
+        events.publish(pre_touchdown)
         spin_until(executor, lambda: False, timeout=0.2)
-        assert tick().setpoint == 0.0                                 # position regulator off
+        ahead = tick()
+        params = load_params()
+        expected = soon + touchdown_time(state.z, state.z_dot, 0.4, 0.0, params.rest_length, params.gravity,
+                                          params.flight_damping_vertical)
+        assert (ahead.mode, ahead.setpoint) == (MotorCommand.MODE_RAMP, pytest.approx(decision.tau_0))
+        assert ahead.header.stamp.sec + ahead.header.stamp.nanosec * 1e-9 == pytest.approx(expected, abs=1e-6)
+        assert soon < expected < soon + 0.01
         touchdown = GaitEvent(type=GaitEvent.TOUCHDOWN)
-        touchdown.header.stamp = stamp(10.2)
+        touchdown.header.stamp = stamp(soon + 0.01)
         events.publish(touchdown)
         spin_until(executor, lambda: False, timeout=0.2)
         ramp = tick()                     # the driver runs the ramp, from the touchdown's stamp
         assert (ramp.mode, ramp.setpoint, ramp.duration) == (
             MotorCommand.MODE_RAMP, pytest.approx(decision.tau_0), pytest.approx(decision.predicted_liftoff_time))
-        assert (ramp.header.stamp.sec, ramp.header.stamp.nanosec) == (10, 200_000_000)
+        assert (ramp.header.stamp.sec, ramp.header.stamp.nanosec) == (touchdown.header.stamp.sec,
+                                                                      touchdown.header.stamp.nanosec)
         liftoff = GaitEvent(type=GaitEvent.LIFTOFF)
         liftoff.state.leg_angle = -0.31
         events.publish(liftoff)

@@ -279,22 +279,48 @@ def test_pdo_contents_and_scaling_with_the_current_limit(rig):
     assert tpdo1[0].raw == status.statusword == eo.STATUSWORD_OF_STATE[State.OPERATION_ENABLED]
 
 
+def _run_ramp(r, tau_0, duration, stamp, steps):
+    """Keep-alive repeats of a MODE_RAMP command stamped `stamp` (the age grows); (time, mA) per step."""
+    seen = []
+    for _ in range(steps):
+        r.step(1, command=(MODE_RAMP, tau_0, duration, r.clock.t + 0.001 - stamp))
+        seen.append((r.clock.t, r.rpdos[-1][2][2]))
+    return seen
+
+
+def _ramp_milliamps(tau_0, duration, elapsed):
+    return _milliamps(-tau_0 * (1.0 - elapsed / duration) if 0.0 <= elapsed < duration else 0.0)
+
+
 def test_ramp_mode_runs_the_stance_ramp_in_the_driver_from_its_start(rig):
     r = rig().start()
     r.enable(torque=1.0)
     tau_0, duration, age = 6.0, 0.05, 0.004               # the touchdown was 4 ms before the command arrived
     r.driver.command(MODE_RAMP, tau_0, duration, age)
     start = r.clock.t - age
-    seen = []
-    for _ in range(60):                                   # repeats of the same ramp (keep-alive) keep its start
-        r.step(1, command=(MODE_RAMP, tau_0, duration, 0.0))
-        seen.append((r.clock.t, r.rpdos[-1][2][2]))
+    seen = _run_ramp(r, tau_0, duration, start, 60)       # repeats of the same ramp (keep-alive) keep its start
     for t, milliamps in seen:
-        elapsed = t - start
-        torque = -tau_0 * (1.0 - elapsed / duration) if elapsed < duration else 0.0
-        assert milliamps == pytest.approx(_milliamps(torque), abs=1)
+        assert milliamps == pytest.approx(_ramp_milliamps(tau_0, duration, t - start), abs=1)
     assert seen[-1][1] == 0 and r.driver.counters["commands_rejected"] == 0
     assert not r.driver.command(MODE_RAMP, tau_0, 0.0)   # a ramp needs a positive duration
+
+
+def test_a_ramp_scheduled_ahead_waits_for_its_stamp_and_moves_to_a_new_one(rig):
+    """The controller sends the ramp at pre-touchdown, stamped with the predicted touchdown: zero current
+    until then; the measured touchdown (a new stamp, 2 ms later) moves the running ramp."""
+    r = rig().start()
+    r.enable(torque=1.0)
+    tau_0, duration = 6.0, 0.05
+    predicted = r.clock.t + 0.008
+    early = _run_ramp(r, tau_0, duration, predicted, 12)
+    for t, milliamps in early:
+        assert milliamps == pytest.approx(_ramp_milliamps(tau_0, duration, t - predicted), abs=1)
+    assert early[0][1] == 0 and early[-1][1] != 0
+    measured = predicted + 0.002
+    late = _run_ramp(r, tau_0, duration, measured, 60)
+    for t, milliamps in late:
+        assert milliamps == pytest.approx(_ramp_milliamps(tau_0, duration, t - measured), abs=1)
+    assert r.driver.counters["commands_rejected"] == 0
 
 
 def test_command_watchdog_quick_stops_then_disables_and_recovers(rig):

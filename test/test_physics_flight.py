@@ -1,5 +1,7 @@
 """Closed-form flight (2.13)-(2.16) against numerical integration of (2.8)."""
 
+import math
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -34,3 +36,18 @@ def test_apex_and_descent_times_solve_their_equations(damping_v):
     t_down = descent_time(drops, G, damping_v)
     z = flight_state(t_down, 0.0, 0.5, 1.0, 0.0, G, 0.01, damping_v)[1]
     assert np.allclose(0.5 - z, drops, rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize("z0, zdot0, leg_angle, leg_rate", [(0.36, -2.4, 0.40, 0.3), (0.33, -0.5, 0.25, -1.0),
+                                                             (0.40, 1.0, 0.45, 0.0)])
+def test_touchdown_time_is_where_the_integrated_flight_meets_the_toe(z0, zdot0, leg_angle, leg_rate):
+    from scipy.integrate import solve_ivp
+
+    from hopper_ros.physics.flight import touchdown_time
+
+    g, d_v, rest_length = 11.42, 0.08, 0.34
+    t = touchdown_time(z0, zdot0, leg_angle, leg_rate, rest_length, g, d_v)
+    toe = lambda t, s: s[0] - rest_length * math.cos(leg_angle + leg_rate * t)  # noqa: E731
+    toe.terminal = True
+    solved = solve_ivp(lambda t, s: [s[1], -g - d_v * s[1]], [0, 1.0], [z0, zdot0], rtol=1e-12, atol=1e-14, events=toe)
+    assert t == pytest.approx(solved.t_events[0][0], abs=1e-9)

@@ -50,6 +50,8 @@ class StrideRow:
     forward_speed: float
     tau_0: float
     touchdown_angle: float
+    touchdown_angle_actual: float = math.nan   # the leg angle the event detector saw at touchdown
+    touchdown_seen_after: float = math.nan     # [s] the touchdown event's detection delay
 
 
 def main(args: argparse.Namespace) -> int:
@@ -98,14 +100,18 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
 
-    from hopper_ros.msg import ApexState, BodyState, MotorStatus, NodeDiagnostics, StrideCommand
+    from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorStatus, NodeDiagnostics, StrideCommand
 
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("demo_monitor")
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    seen = {"state": 0, "enabled": False, "falls": 0, "setpoint": None, "commands": {}, "apexes": []}
+    seen = {"state": 0, "enabled": False, "falls": 0, "setpoint": None, "commands": {}, "apexes": [], "touchdowns": {}}
+
+    def on_event(msg):
+        if msg.type == GaitEvent.TOUCHDOWN:
+            seen["touchdowns"][msg.stride_index] = (msg.state.leg_angle, msg.detection_delay)
 
     def on_status(msg):
         seen["enabled"] = msg.state == MotorStatus.STATE_OPERATION_ENABLED
@@ -122,6 +128,7 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
     node.create_subscription(ApexState, "apex_setpoint", lambda m: seen.__setitem__("setpoint", m), latched)
     node.create_subscription(StrideCommand, "stride_command", lambda m: seen["commands"].__setitem__(m.stride_index, m), 10)
     node.create_subscription(ApexState, "apex", seen["apexes"].append, 10)
+    node.create_subscription(GaitEvent, "gait_event", on_event, 10)
     throw = node.create_publisher(ApexState, "sim/throw", 10)
     try:
         started = time.monotonic()
@@ -144,7 +151,7 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
         rows: list[StrideRow] = []
         handled = 0
         print(f"{'stride':>6} {'time s':>7} {'height m':>9} {'target':>7} {'speed m/s':>9} {'target':>7} "
-              f"{'tau_0 Nm':>8} {'theta_td':>8}", flush=True)
+              f"{'tau_0 Nm':>8} {'theta_td':>8} {'actual':>7} {'td seen ms':>10}", flush=True)
         while len(rows) < args.strides:
             executor.spin_once(timeout_sec=0.05)
             if seen["falls"]:
@@ -162,11 +169,13 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
                     continue              # the first apex after the throw opens the first stride
                 row = StrideRow(len(rows) + 1, time.monotonic() - thrown, command.target_apex_height,
                                 command.target_forward_speed, closing.apex_height, closing.forward_speed,
-                                command.tau_0, command.touchdown_angle)
+                                command.tau_0, command.touchdown_angle,
+                                *seen["touchdowns"].get(opening.stride_index, (math.nan, math.nan)))
                 rows.append(row)
                 print(f"{row.stride:6d} {row.time:7.2f} {row.apex_height:9.4f} {row.target_height:7.3f} "
                       f"{row.forward_speed:9.3f} {row.target_speed:7.2f} {row.tau_0:8.2f} "
-                      f"{math.degrees(row.touchdown_angle):7.1f}d", flush=True)
+                      f"{math.degrees(row.touchdown_angle):7.1f}d {math.degrees(row.touchdown_angle_actual):6.1f}d "
+                      f"{row.touchdown_seen_after * 1e3:10.2f}", flush=True)
         return rows, ""
     finally:
         executor.shutdown()
@@ -185,18 +194,22 @@ def _report(rows: list[StrideRow], out: Path) -> None:
     with open(out / "strides.csv", "w", newline="", encoding="utf-8") as handle:
         writer = csv.writer(handle)
         writer.writerow(["stride", "time_s", "target_height_m", "target_speed_m_s", "apex_height_m",
-                         "forward_speed_m_s", "tau_0_N_m", "touchdown_angle_rad"])
+                         "forward_speed_m_s", "tau_0_N_m", "touchdown_angle_rad", "touchdown_angle_actual_rad",
+                         "touchdown_seen_after_s"])
         for r in rows:
             writer.writerow([r.stride, f"{r.time:.3f}", r.target_height, r.target_speed, f"{r.apex_height:.5f}",
-                             f"{r.forward_speed:.5f}", f"{r.tau_0:.4f}", f"{r.touchdown_angle:.5f}"])
+                             f"{r.forward_speed:.5f}", f"{r.tau_0:.4f}", f"{r.touchdown_angle:.5f}",
+                             f"{r.touchdown_angle_actual:.5f}", f"{r.touchdown_seen_after:.5f}"])
     if not rows:
         return
-    lines = ["| stride | apex height [m] | setpoint | error [cm] | speed [m/s] | setpoint | error [m/s] | tau_0 [N m] | theta_td [deg] |",
-             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = ["| stride | apex height [m] | setpoint | error [cm] | speed [m/s] | setpoint | error [m/s] | tau_0 [N m] "
+             "| theta_td [deg] | at touchdown [deg] | touchdown seen after [ms] |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r.stride} | {r.apex_height:.4f} | {r.target_height:.2f} | {100 * (r.apex_height - r.target_height):+.2f} "
                      f"| {r.forward_speed:.3f} | {r.target_speed:.2f} | {r.forward_speed - r.target_speed:+.3f} "
-                     f"| {r.tau_0:.2f} | {math.degrees(r.touchdown_angle):.1f} |")
+                     f"| {r.tau_0:.2f} | {math.degrees(r.touchdown_angle):.1f} | {math.degrees(r.touchdown_angle_actual):.1f} "
+                     f"| {r.touchdown_seen_after * 1e3:.1f} |")
     table = "\n".join(lines)
     print("\n" + table, flush=True)
     (out / "summary.md").write_text("# Closed-loop demo (Fig 5.5 schedule)\n\n" + table + "\n\n![Fig 5.5](fig5_5.png)\n",

@@ -14,6 +14,13 @@ Single stride (`experiment:=single_stride`, with `tau_0` and `touchdown_angle`):
 data collection; the ramp ends at the model's predicted lift-off for the apex the robot is
 thrown to; after the second apex the leg is held and then the drive disabled.
 
+Stance ramp timing (control.yaml `stride`, beyond the thesis): with `ramp_ahead` the ramp is
+sent at the pre-touchdown event already, stamped with the touchdown predicted from that event's
+state (hopper_ros.physics.flight.touchdown_time); the driver keeps zero current until that
+instant and then runs the ramp, and the measured touchdown re-stamps it. The touchdown event
+itself reaches the node only after the sensing chain's latency. No touchdown within
+`touchdown_grace` of the predicted one cancels the ramp (zero current, counted).
+
 A MotorCommand goes out at once when an input changes it (apex, gait event, setpoint, fault) and
 is repeated every `keep_alive` otherwise (a timer), which feeds the motor driver's watchdog; the
 node needs no state estimates, so it wakes at 200 Hz instead of with every 1 kHz sample. In
@@ -30,6 +37,7 @@ from __future__ import annotations
 
 import math
 
+from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -40,6 +48,7 @@ from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings, St
 from hopper_ros.control.stride_machine import Phase, StrideMachine, StridePlan
 from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, NodeDiagnostics, StrideCommand
 from hopper_ros.nodes.common import run_node
+from hopper_ros.physics.flight import touchdown_time
 from hopper_ros.physics.params import load_params
 from hopper_ros.physics.predictors import predict_stride
 
@@ -50,6 +59,11 @@ COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=R
 
 def _seconds(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+def _stamp(seconds: float) -> Time:
+    sec, nanosec = divmod(int(round(seconds * 1e9)), 1_000_000_000)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 class DeadbeatControllerNode(Node):
@@ -66,7 +80,13 @@ class DeadbeatControllerNode(Node):
         self.keep_alive = param("keep_alive", 0.005, "[s] an unchanged motor command is repeated this often")
         self._last_sent = -math.inf
         self._touchdown_stamp = None
-        settings = dict(load_yaml(config_file).get("deadbeat", {}))
+        config = load_yaml(config_file)
+        settings = dict(config.get("deadbeat", {}))
+        stride = config.get("stride", {})
+        self.ramp_ahead = bool(stride.get("ramp_ahead", False))
+        self.touchdown_grace = float(stride.get("touchdown_grace", 0.02))
+        self._predicted_touchdown = math.nan
+        self._cancelled_ramp = False
         if adaptation:
             if adaptation not in ("true", "false"):
                 raise ValueError(f"adaptation must be true or false, got {adaptation!r}")
@@ -82,7 +102,7 @@ class DeadbeatControllerNode(Node):
         elif self.experiment != "closed_loop":
             raise ValueError(f"experiment must be closed_loop or single_stride, got {self.experiment!r}")
         self.setpoint: tuple[float, float] | None = None
-        self.counters = {"strides": 0, "infeasible": 0, "faults": 0, "commands": 0}
+        self.counters = {"strides": 0, "infeasible": 0, "faults": 0, "commands": 0, "touchdowns_missed": 0}
         self.last_decision: StrideDecision | None = None
         self._brake_since = math.nan
 
@@ -146,6 +166,8 @@ class DeadbeatControllerNode(Node):
         when = _seconds(msg.header.stamp)
         if msg.type == GaitEvent.PRE_TOUCHDOWN:
             self.machine.on_pre_touchdown()
+            self._predicted_touchdown = when + self._time_to_touchdown(msg) if self.ramp_ahead else math.nan
+            self._cancelled_ramp = False
         elif msg.type == GaitEvent.TOUCHDOWN:
             self.machine.on_touchdown(when)
             self._touchdown_stamp = msg.header.stamp
@@ -154,6 +176,12 @@ class DeadbeatControllerNode(Node):
         else:
             return
         self._send()
+
+    def _time_to_touchdown(self, msg: GaitEvent) -> float:
+        """From the pre-touchdown event's state: the flight (2.14) until the toe meets the ground."""
+        s, p = msg.state, self.params
+        return touchdown_time(s.z, s.z_dot, s.leg_angle, s.leg_angle_rate, p.rest_length, p.gravity,
+                              p.flight_damping_vertical)
 
     def _on_diagnostics(self, msg: NodeDiagnostics) -> None:
         """The motor driver reports a drive fault or a lost drive at once: hold the leg, no torque."""
@@ -175,11 +203,25 @@ class DeadbeatControllerNode(Node):
             elif now - self._brake_since > 0.5:
                 mode, setpoint = MotorCommand.MODE_DISABLED, 0.0     # the robot sits back: drive off
         command = self._command
-        if self.machine.phase is Phase.STANCE and self.machine.plan is not None:
+        phase, plan = self.machine.phase, self.machine.plan
+        if phase is Phase.STANCE and plan is not None:
             # the driver runs the ramp itself, from the touchdown time: jitter in this stream cannot shift it
-            mode, setpoint = MotorCommand.MODE_RAMP, self.machine.plan.tau_0
-            command.duration = self.machine.plan.ramp_duration
+            mode, setpoint = MotorCommand.MODE_RAMP, plan.tau_0
+            command.duration = plan.ramp_duration
             stamp = self._touchdown_stamp
+        elif phase is Phase.PRE_TOUCHDOWN and plan is not None and math.isfinite(self._predicted_touchdown):
+            if now <= self._predicted_touchdown + self.touchdown_grace:
+                # scheduled ahead: zero current until the predicted touchdown, then the ramp
+                mode, setpoint = MotorCommand.MODE_RAMP, plan.tau_0
+                command.duration = plan.ramp_duration
+                stamp = _stamp(self._predicted_touchdown)
+            else:
+                command.duration = 0.0
+                if not self._cancelled_ramp:
+                    self._cancelled_ramp = True
+                    self.counters["touchdowns_missed"] += 1
+                    self.get_logger().warning(f"no touchdown within {self.touchdown_grace * 1e3:.0f} ms of the "
+                                              f"predicted one: stance ramp cancelled")
         else:
             command.duration = 0.0
         if ((mode, float(setpoint)) == (command.mode, command.setpoint)

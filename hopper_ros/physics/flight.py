@@ -80,3 +80,36 @@ def descent_time(drop, gravity, damping_v, iterations: int = 2):
     first-order damping correction; two steps reach 1e-15 s for |d_v t| < 0.1.
     """
     return descent_time_xp(select(drop), drop, gravity, damping_v, iterations)
+
+
+def touchdown_time(z0, zdot0, leg_angle, leg_rate, rest_length, gravity, damping_v, max_steps=20):
+    """Time until the toe reaches the ground in flight: z(t) = rho_0 cos(theta + theta' t), with z(t)
+    of (2.14) and the leg swinging at a constant rate (scalars; Newton from the linearised fall).
+
+    Used to schedule the stance ramp ahead of the touchdown event (the controller learns of a
+    touchdown only after the sensing chain's latency). NaN if the toe does not come down (the
+    gap between toe and ground is not closing) or Newton does not converge.
+    """
+    import math
+
+    def gap(t):
+        z = z0 + gravity * ramp_integral(math, damping_v, t) + zdot0 * decay_integral(math, damping_v, t)
+        return z - rest_length * math.cos(leg_angle + leg_rate * t)
+
+    def gap_rate(t):
+        zdot = zdot0 * math.exp(-damping_v * t) - gravity * decay_integral(math, damping_v, t)
+        return zdot + rest_length * math.sin(leg_angle + leg_rate * t) * leg_rate
+
+    t = 0.0
+    if zdot0 > 0.0:      # rising: start on the descending branch, a free fall from the apex
+        t = apex_time(zdot0, gravity, damping_v)
+        t += math.sqrt(2.0 * max(0.0, gap(t)) / gravity)
+    for _ in range(max_steps):
+        slope = gap_rate(t)
+        if slope >= 0.0:
+            return math.nan
+        step = gap(t) / slope
+        t -= step
+        if abs(step) < 1e-7:
+            return t
+    return t if abs(gap(t)) < 1e-6 else math.nan

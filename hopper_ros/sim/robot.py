@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 from hopper_ros.canbus.epos2_objects import OperationMode
+from hopper_ros.canbus.epos2_regulator import POSITION_LOOP_PERIOD
 from hopper_ros.hardware.encoders import BoomKinematics, to_register
 from hopper_ros.hardware.motor import HipMotor
 from hopper_ros.hardware.packet import EncoderPacket
@@ -104,6 +105,9 @@ class SimRobot:
         self.drive = drive
         self.experiment = None
         self.period = config.period
+        # the drive's regulator runs at its own 1 ms loop whatever the packet period (a 2 ms sample
+        # period must not halve the EPOS2's position loop): `step` advances in this many parts
+        self._substeps = max(1, round(self.period / POSITION_LOOP_PERIOD)) if drive is not None else 1
         self.sequence = 0
         self.delay = config.value("actuation_delay", "delay")
         self.torque_limit = config.value("torque_saturation", "max_torque") or math.inf
@@ -135,6 +139,15 @@ class SimRobot:
         return max(-self.torque_limit, min(self.torque_limit, torque))
 
     def step(self) -> SimSample:
+        """One sample period: the drive's loop periods within it, then the packet of its end."""
+        events: list[PlantEvent] = []
+        for _ in range(self._substeps):
+            events += self._advance(self.period / self._substeps)
+        if self.experiment is not None:
+            self.experiment.on_events(events)
+        return self._sample(events)
+
+    def _advance(self, dt: float) -> list[PlantEvent]:
         plant = self.plant
         t0 = plant.t
         demand, commanded = 0.0, True
@@ -153,10 +166,7 @@ class SimRobot:
         else:
             current = self._current
             torque = lambda t: self.hip_torque(current(t))  # noqa: E731 - per-period closure
-        events = plant.advance(self.period, torque)
-        if self.experiment is not None:
-            self.experiment.on_events(events)
-        return self._sample(events)
+        return plant.advance(dt, torque)
 
     def _sample(self, events: list[PlantEvent]) -> SimSample:
         plant, k = self.plant, self.kinematics
