@@ -13,11 +13,18 @@ on the wall clock and notes CLOCK_MONOTONIC just before each sendto, by sequence
 An event is matched to the packet that revealed it by GaitEvent.state.sequence, a state by
 BodyState.sequence. The first second is warm-up, not measured.
 
-Figures: packet_to_event_p50_us / _p99_us / _max_us (packet sent -> its event received; target
-p99 < 1000 us), packet_to_state_p50_us / _p99_us (packet sent -> its BodyState received),
+The main run puts every process on SCHED_FIFO (priority 50, as the demo's loop runs; normal
+scheduling where that is not permitted: `sensing_realtime_priority` 0).
+
+Figures: packet_to_event_p50_us / _p99_us / _max_us (packet sent -> its event published by the
+detector, from the event's stamp + detection_delay, both host wall clock, against the source's
+wall clock at sendto; target p99 < 1000 us), packet_to_event_received_p50_us / _p99_us (the same
+to the sink's callback: one more hop), packet_to_measurement_p50_us / _p99_us (to the sink's
+BodyMeasurement callback), packet_to_state_p50_us / _p99_us (packet sent -> its BodyState received),
 deadline_miss_pct (share of the packets whose BodyState did not reach the subscriber within one
 sample period, 1 ms, of the packet being sent; never counts as a miss), events_measured,
-sensing_source_rate_hz. 60 s of packets (quick: 10 s). The same again (30 s) with the nodes on
+sensing_source_rate_hz. 60 s of packets (quick: 10 s). The same (30 s) with normal scheduling:
+*_normal_scheduling. And (30 s) with the nodes on
 rclpy's SingleThreadedExecutor (HOPPER_EXECUTOR=single) instead of run_node's default events
 executor: packet_to_event_p50_us_single_executor, _p99_us_single_executor,
 deadline_miss_pct_single_executor.
@@ -44,6 +51,7 @@ WARMUP_S = 1.0
 PERIOD_S = 1e-3
 START_TIMEOUT_S = 60.0
 NODES = ("encoder_bridge", "state_estimator", "event_detector")
+REALTIME_PRIORITY = 50   # SCHED_FIFO of every process of the main run, as in config/launch/demo.yaml
 
 
 
@@ -100,13 +108,15 @@ def _free_port():
         return probe.getsockname()[1]
 
 
-def latency(duration, executor="events"):
+def latency(duration, executor="events", realtime_priority=0):
     """The three nodes as `hopper run` starts them (hopper_ros.nodes.common.run_node), on rclpy's
-    events executor (its default) or, with executor="single", HOPPER_EXECUTOR=single."""
-    namespace = f"/bench_sensing_{os.getpid()}_{executor}"
+    events executor (its default) or, with executor="single", HOPPER_EXECUTOR=single; with a
+    realtime_priority every process of the run (nodes, source, sink) on SCHED_FIFO at it."""
+    namespace = f"/bench_sensing_{os.getpid()}_{executor}_{realtime_priority}"
     port = _free_port()
     env = child_env(unbuffered=True)
     env["HOPPER_EXECUTOR"] = executor
+    env["HOPPER_REALTIME_PRIORITY"] = str(realtime_priority)
     me = os.path.abspath(__file__)
     nodes = []
     sink = None
@@ -231,11 +241,15 @@ def _sink(namespace, duration):
 
 
 def run(quick=False):
+    from hopper_ros.environment import realtime_scheduling_allowed
+
     costs = stage_costs(QUICK_COST_DURATION_S if quick else COST_DURATION_S)
-    result = latency(QUICK_DURATION_S if quick else DURATION_S)
+    priority = REALTIME_PRIORITY if realtime_scheduling_allowed()[0] else 0
+    result = latency(QUICK_DURATION_S if quick else DURATION_S, realtime_priority=priority)
     events, states = result["event_latency"], result["state_latency"]
     if not events:
         raise RuntimeError("no gait event came through")
+    normal = latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S)
     variant = latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S, executor="single")
     return [
         {"name": "bridge_sample_us", "value": round(costs["bridge_sample_us"], 1), "unit": "us"},
@@ -256,6 +270,13 @@ def run(quick=False):
          "value": round(percentile(result["measurement_latency"], 0.99), 1), "unit": "us"},
         {"name": "deadline_miss_pct", "value": round(result["deadline_miss_pct"], 3), "unit": "%"},
         {"name": "events_measured", "value": len(events), "unit": "events"},
+        {"name": "sensing_realtime_priority", "value": priority, "unit": "SCHED_FIFO"},
+        # the same with normal scheduling (SCHED_OTHER)
+        {"name": "packet_to_event_p50_us_normal_scheduling",
+         "value": round(percentile(normal["event_latency"], 0.50), 1), "unit": "us"},
+        {"name": "packet_to_event_p99_us_normal_scheduling",
+         "value": round(percentile(normal["event_latency"], 0.99), 1), "unit": "us"},
+        {"name": "deadline_miss_pct_normal_scheduling", "value": round(normal["deadline_miss_pct"], 3), "unit": "%"},
         {"name": "sensing_source_rate_hz", "value": round(result["rate_hz"], 1), "unit": "Hz"},
         # the same with HOPPER_EXECUTOR=single (rclpy's SingleThreadedExecutor in run_node)
         {"name": "packet_to_event_p50_us_single_executor",
@@ -269,6 +290,10 @@ def run(quick=False):
 if __name__ == "__main__":
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     role = sys.argv[1] if len(sys.argv) > 1 else "run"
+    if role in ("source", "sink"):
+        from hopper_ros.environment import apply_realtime_priority
+
+        apply_realtime_priority()            # HOPPER_REALTIME_PRIORITY of the run, as the nodes
     if role == "source":
         _source(int(sys.argv[2]), float(sys.argv[3]))
     elif role == "sink":

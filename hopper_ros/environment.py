@@ -91,3 +91,14 @@ def apply_realtime_priority(environ: MutableMapping[str, str] | None = None) -> 
     except PermissionError:
         return f"normal scheduling ({REALTIME_PRIORITY_VAR}={priority} refused: no permission for SCHED_FIFO)"
     return f"SCHED_FIFO priority {priority}"
+
+
+def realtime_scheduling_allowed() -> tuple[bool, str]:
+    """(whether this process may use SCHED_FIFO, why not); tried on this thread, then undone."""
+    try:
+        previous = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+        os.sched_setscheduler(0, previous[0], previous[1])
+    except (PermissionError, OSError, AttributeError) as exc:
+        return False, str(exc) or type(exc).__name__
+    return True, ""

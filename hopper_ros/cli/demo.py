@@ -2,7 +2,8 @@
 
   hopper demo [--strides N] [-o DIR] [--launch FILE] [--timeout S]
 
-Starts the whole graph as separate processes with our launcher (`config/launch/demo.yaml`:
+Starts the whole graph as separate processes with our launcher (`config/launch/demo.yaml`, 1 kHz
+with the loop's nodes on SCHED_FIFO; where that is not permitted `config/launch/demo_500hz.yaml`:
 simulated robot, encoder bridge, state estimator, event detector, deadbeat controller, motor
 driver, setpoint scheduler; their log goes to DIR/launch.log), waits until the graph is up (state
 estimates flowing, drive enabled, controller listening), throws the robot to the first setpoint's
@@ -26,9 +27,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hopper_ros.config import config_path
+from hopper_ros.environment import realtime_scheduling_allowed
 
 HELP = "run the closed-loop Fig 5.5 demo on the simulated robot and report it"
 DEFAULT_LAUNCH = "launch/demo.yaml"
+FALLBACK_LAUNCH = "launch/demo_500hz.yaml"   # without SCHED_FIFO (config/launch/demo.yaml says why)
 STARTUP_TIMEOUT = 60.0   # [s] until the graph is up
 STOP_TIMEOUT = 20.0      # [s] for the launcher to stop everything
 
@@ -36,7 +39,8 @@ STOP_TIMEOUT = 20.0      # [s] for the launcher to stop everything
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--strides", type=int, default=30, help="strides to run after the throw (default 30)")
     parser.add_argument("-o", "--output", default="demo_out", help="output folder (default demo_out)")
-    parser.add_argument("--launch", default=DEFAULT_LAUNCH, help=f"launch file (default {DEFAULT_LAUNCH})")
+    parser.add_argument("--launch", default=None,
+                        help=f"launch file (default {DEFAULT_LAUNCH}, or {FALLBACK_LAUNCH} without SCHED_FIFO)")
     parser.add_argument("--timeout", type=float, default=120.0, help="give up after S seconds of running (default 120)")
 
 
@@ -57,7 +61,13 @@ class StrideRow:
 def main(args: argparse.Namespace) -> int:
     out = Path(args.output).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    launch_file = config_path(args.launch)
+    launch = args.launch
+    if launch is None:
+        allowed, why = realtime_scheduling_allowed()
+        launch = DEFAULT_LAUNCH if allowed else FALLBACK_LAUNCH
+        if not allowed:
+            print(f"demo: SCHED_FIFO is not permitted here ({why}): running the 500 Hz graph", flush=True)
+    launch_file = config_path(launch)
     log_path = out / "launch.log"
     print(f"demo: starting the graph ({launch_file.name}); node logs in {log_path}", flush=True)
     log = open(log_path, "w", encoding="utf-8")
