@@ -97,6 +97,17 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         assert not strides[-1].feasible and "no touchdown angle" in strides[-1].reason and strides[-1].tau_0 == 0.0
         held = tick()
         assert held.mode == MotorCommand.MODE_POSITION
+
+        # a predicted touchdown that does not come: the ramp is cancelled, zero current
+        apex.publish(ApexState(stride_index=5, apex_height=0.39, forward_speed=2.0))
+        assert spin_until(executor, lambda: len(strides) == 3 and strides[-1].feasible)
+        missed = GaitEvent(type=GaitEvent.PRE_TOUCHDOWN)
+        missed.header.stamp = stamp(time.time() - 0.1)          # 0.1 s ago: beyond touchdown_grace
+        missed.state.z, missed.state.z_dot, missed.state.leg_angle = 0.205 * math.cos(0.4) + 0.02, -2.3, 0.4
+        events.publish(missed)
+        assert spin_until(executor, lambda: commands and commands[-1].mode == MotorCommand.MODE_CURRENT, timeout=5.0)
+        assert commands[-1].setpoint == 0.0
+        node_process.wait_for_line(r"no touchdown within 20 ms of the predicted one: stance ramp cancelled")
     finally:
         node_process.signal(signal.SIGINT)
         assert node_process.wait() == 0
