@@ -39,6 +39,35 @@ def test_decision_hits_the_model_return_map():
     assert decision.ramp_duration == pytest.approx(check.ramp_duration, rel=1e-2)
 
 
+def test_priming_at_the_setpoint_shortens_the_first_decision_and_learns_nothing(monkeypatch):
+    import hopper_ros.control.deadbeat as deadbeat
+
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(kwargs.get("method"))
+        return predict_stride(*args, **kwargs)
+
+    monkeypatch.setattr(deadbeat, "predict_stride", counted)
+    cold = controller()
+    first_cold = cold.first_decision(0.395, 2.02, 0.39, 2.0)
+    cold_evaluations = len(calls)
+    primed = controller()
+    primed.prime(0.39, 2.0)
+    assert (primed.bias_height, primed.bias_speed) == (0.0, 0.0)
+    primed.observe(0.5, 3.0)                                  # nothing pending: nothing learnt
+    assert (primed.bias_height, primed.bias_speed) == (0.0, 0.0)
+    calls.clear()
+    first_primed = primed.first_decision(0.395, 2.02, 0.39, 2.0)
+    assert len(calls) < cold_evaluations                      # Newton starts near the solution
+    # and lands near the stride the model wants (stage 1, on the AAS: refine() does the rest)
+    assert first_cold.feasible
+    assert first_primed.feasible and first_primed.reason == "" and first_primed.tau_0 < SETTINGS.max_torque
+    check = predict_stride(primed.params, 0.395, 2.02, first_primed.touchdown_angle, first_primed.tau_0,
+                           first_primed.ramp_duration)
+    assert check.next_apex_height == pytest.approx(0.39, abs=5e-3) and check.next_forward_speed == pytest.approx(2.0, abs=0.05)
+
+
 def test_infeasible_strides_fall_back_safely_and_say_why():
     ctl = controller()
     decision = ctl.decide(0.10, 2.0, 0.39, 2.0)          # the toe is already in the ground

@@ -127,6 +127,17 @@ class DeadbeatController:
         ratio = forward_speed * stance_time / (2.0 * p.rest_length)
         return math.asin(max(-0.9, min(0.9, ratio)))
 
+    def prime(self, target_height: float, target_speed: float) -> None:
+        """Before the first apex: solve the steady stride at the setpoint (apex = setpoint) once,
+        so that the first real decision starts its Newton from near a solution with a Jacobian
+        at hand instead of from the neutral angle and `initial_torque` (measured: 0.6 ms instead
+        of 0.13 ms for the first stride). Learns nothing; a controller that has decided keeps its
+        warm start."""
+        if self._warm_angle is not None:
+            return
+        self.decide(target_height, target_speed, target_height, target_speed)
+        self._pending = None
+
     # ------------------------------------------------------------------ decision
     def decide(self, apex_height: float, forward_speed: float, target_height: float, target_speed: float,
                stride_index: int = 0) -> StrideDecision:

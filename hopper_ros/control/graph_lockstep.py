@@ -62,6 +62,7 @@ class GraphLockstep:
 
     def set_setpoint(self, height: float, speed: float) -> None:
         self.setpoint = (height, speed)
+        self.controller.prime(height, speed)
         self.machine.hold(self.controller.neutral_angle(speed))
 
     def step(self, run: GraphRun) -> None:

@@ -40,6 +40,7 @@ def run_closed_loop(controller: DeadbeatController, sim_config, hardware: Mappin
     robot = SimRobot(sim_config, hardware)
     apex_height, forward_speed = start or setpoints[0]
     robot.throw(apex_height, forward_speed, controller.neutral_angle(forward_speed))
+    controller.prime(*setpoints[0])
     records = []
     for index, (target_height, target_speed) in enumerate(setpoints):
         decision = controller.decide(apex_height, forward_speed, target_height, target_speed, index)

@@ -124,6 +124,7 @@ class DeadbeatControllerNode(Node):
     def _on_setpoint(self, msg: ApexState) -> None:
         self.setpoint = (msg.apex_height, msg.forward_speed)
         if self.experiment == "closed_loop":      # ready for the throw: the leg at the neutral angle
+            self.controller.prime(*self.setpoint)
             self.machine.hold(self.controller.neutral_angle(msg.forward_speed))
         self.get_logger().info(f"setpoint: apex {msg.apex_height:.3f} m at {msg.forward_speed:.2f} m/s")
         self._send()
