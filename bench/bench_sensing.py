@@ -8,10 +8,13 @@ single-stride experiments (thrown anew after each) through EncoderBridge.process
 
 Latency (five processes on loopback, their own namespace): encoder_bridge, state_estimator and
 event_detector (`hopper run ...`); a source that replays SimRobot's packet stream over UDP at 1 kHz
-on the wall clock and notes CLOCK_MONOTONIC just before each sendto, by sequence number; a sink
-(rclpy) that notes CLOCK_MONOTONIC first thing in its callbacks of `body_state` and `gait_event`.
-An event is matched to the packet that revealed it by GaitEvent.state.sequence, a state by
-BodyState.sequence. The first second is warm-up, not measured.
+on the wall clock and notes the clocks just before each sendto, by sequence number; a sink
+(rclpy) that listens to `gait_event` and the detector's `diagnostics`. An event is matched to the
+packet that revealed it by GaitEvent.state.sequence. The first second is warm-up, not measured.
+
+rclpy_two_hop_floor_p50_us / _p99_us: the same path with no work and no UDP (a 1 kHz publisher, a
+relay, an end noting publication time; 30 s, quick 10 s, same scheduling as the main run): what
+two hops of rclpy cost on this machine, the part of packet_to_event no node can remove.
 
 The main run puts every process on SCHED_FIFO (priority 50, as the demo's loop runs; normal
 scheduling where that is not permitted: `sensing_realtime_priority` 0).
@@ -19,10 +22,10 @@ scheduling where that is not permitted: `sensing_realtime_priority` 0).
 Figures: packet_to_event_p50_us / _p99_us / _max_us (packet sent -> its event published by the
 detector, from the event's stamp + detection_delay, both host wall clock, against the source's
 wall clock at sendto; target p99 < 1000 us), packet_to_event_received_p50_us / _p99_us (the same
-to the sink's callback: one more hop), packet_to_measurement_p50_us / _p99_us (to the sink's
-BodyMeasurement callback), packet_to_state_p50_us / _p99_us (packet sent -> its BodyState received),
-deadline_miss_pct (share of the packets whose BodyState did not reach the subscriber within one
-sample period, 1 ms, of the packet being sent; never counts as a miss), events_measured,
+to the sink's callback: one more hop), deadline_miss_pct (the event detector's late_samples over
+its samples: states that reached it more than sensing.yaml's sample_deadline, 1 ms, after their
+sample's instant, i.e. the packet's earliest arrival; from its diagnostics, so that no 1 kHz
+listener loads the machine), events_measured,
 sensing_source_rate_hz. 60 s of packets (quick: 10 s). The same (30 s) with normal scheduling:
 *_normal_scheduling. And (30 s) with the nodes on
 rclpy's SingleThreadedExecutor (HOPPER_EXECUTOR=single) instead of run_node's default events
@@ -147,19 +150,18 @@ def latency(duration, executor="events", realtime_priority=0):
     sent = json.loads(source.stdout.strip().splitlines()[-1])
     send_ns = {int(k): v for k, v in sent["send_ns"].items()}
     first_measured = min(send_ns) + int(WARMUP_S / PERIOD_S)
-    measured = [s for s in send_ns if s >= first_measured]
-    states = {int(k): v for k, v in received["states"].items()}
-    state_latency = sorted((states[s] - send_ns[s]) / 1e3 for s in measured if s in states)
-    measurements = {int(k): v for k, v in received["measurements"].items()}
-    measurement_latency = sorted((measurements[s] - send_ns[s]) / 1e3 for s in measured if s in measurements)
-    misses = sum(1 for s in measured if s not in states or states[s] - send_ns[s] > PERIOD_S * 1e9)
+    # deadline misses: the detector's late_samples over the measured span (its reports after the warm-up)
+    start_ns = min(send_ns.values()) + int(WARMUP_S * 1e9)
+    reports = [r for r in received["reports"] if r[0] >= start_ns]
+    if len(reports) < 2:
+        raise RuntimeError("too few diagnostics reports of the event detector")
+    samples, late = reports[-1][1] - reports[0][1], reports[-1][2] - reports[0][2]
     send_wall_ns = {int(k): v for k, v in sent["send_wall_ns"].items()}
     events = [(s, t, p) for s, t, p in received["events"] if s in send_ns and s >= first_measured]
     event_latency = sorted((p - send_wall_ns[s]) / 1e3 for s, _, p in events)
     event_received_latency = sorted((t - send_ns[s]) / 1e3 for s, t, _ in events)
     return {"event_latency": event_latency, "event_received_latency": event_received_latency,
-            "state_latency": state_latency, "measurement_latency": measurement_latency,
-            "deadline_miss_pct": 100.0 * misses / len(measured), "rate_hz": sent["rate_hz"]}
+            "deadline_miss_pct": 100.0 * late / samples, "rate_hz": sent["rate_hz"]}
 
 
 def _source(port, duration):
@@ -186,35 +188,32 @@ def _source(port, duration):
 
 
 def _sink(namespace, duration):
-    """Receive times of body_state and gait_event (rclpy's EventsExecutor: the cheapest to listen)."""
+    """Receive times of gait_event, and the event detector's diagnostics (its late_samples). Nothing
+    at 1 kHz: a listener of body_state would itself take a third of a core from the nodes."""
     import rclpy
     from rclpy.experimental import EventsExecutor
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    from hopper_ros.msg import BodyMeasurement, BodyState, GaitEvent
+    from hopper_ros.msg import GaitEvent, NodeDiagnostics
 
     rclpy.init()
     node = rclpy.create_node("bench_sensing_sink", namespace=namespace, start_parameter_services=False)
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-    states, measurements, events = {}, {}, []
+    events, reports = [], []
     last = [time.monotonic()]
-
-    def on_state(msg):
-        now = time.monotonic_ns()
-        if msg.measurement_used or msg.outlier_rejected:
-            states.setdefault(msg.sequence, now)
-        last[0] = time.monotonic()
-
-    def on_measurement(msg):
-        measurements.setdefault(msg.sequence, time.monotonic_ns())
 
     def on_event(msg):
         published_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec + round(msg.detection_delay * 1e9)
         events.append((msg.state.sequence, time.monotonic_ns(), published_ns))
+        last[0] = time.monotonic()
 
-    node.create_subscription(BodyState, "body_state", on_state, qos)
+    def on_diagnostics(msg):
+        if msg.node_name.endswith("event_detector"):
+            counters = dict(zip(msg.counter_names, msg.counter_values))
+            reports.append((time.monotonic_ns(), counters["samples"], counters["late_samples"]))
+
     node.create_subscription(GaitEvent, "gait_event", on_event, qos)
-    node.create_subscription(BodyMeasurement, "body_measurement", on_measurement, qos)
+    node.create_subscription(NodeDiagnostics, "diagnostics", on_diagnostics, qos)
     executor = EventsExecutor()
     executor.add_node(node)
     deadline = time.monotonic() + START_TIMEOUT_S
@@ -228,13 +227,96 @@ def _sink(namespace, duration):
         executor.spin_once(timeout_sec=0.05)
     print("ready", flush=True)
     deadline = time.monotonic() + duration + WARMUP_S + START_TIMEOUT_S
-    started = False
     while time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.05)
-        started = started or bool(states)
-        if started and time.monotonic() - last[0] > 3.0:
+        if events and time.monotonic() - last[0] > 3.0:
             break                                # the source is done and nothing came for a while
-    print(json.dumps({"states": states, "measurements": measurements, "events": events}), flush=True)
+    print(json.dumps({"events": events, "reports": reports}), flush=True)
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+# ---------------------------------------------------------------------------- rclpy floor
+
+def floor_latency(duration, realtime_priority=0):
+    """What two rclpy hops cost here with no work at all: a publisher at 1 kHz (in the bridge's
+    place), a relay (the estimator's), an end (the detector's) noting publication time minus the
+    stamp set just before the first publish. The same message type (BodyMeasurement), QoS, executor
+    and scheduling as the nodes; the sensing chain adds the UDP hop and its own work to this."""
+    namespace = f"/bench_sensing_floor_{os.getpid()}"
+    env = child_env(unbuffered=True)
+    env["HOPPER_REALTIME_PRIORITY"] = str(realtime_priority)
+    me = os.path.abspath(__file__)
+    roles = [("floor_relay", "in", "mid"), ("floor_end", "mid", ""), ("floor_source", "", "in")]
+    processes = []
+    try:
+        for role, source, target in roles:
+            processes.append(subprocess.Popen([sys.executable, me, role, namespace, source, target, str(duration)],
+                                              cwd=REPO, env=env, stdout=subprocess.PIPE, text=True))
+        outputs = [process.communicate(timeout=duration + START_TIMEOUT_S + 30)[0] for process in processes]
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+    return sorted(json.loads(outputs[1].strip().splitlines()[-1])["latency_us"])
+
+
+def _floor(role, namespace, source, target, duration):
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+
+    from hopper_ros.msg import BodyMeasurement
+    from hopper_ros.sensing.messages import sample_qos
+
+    rclpy.init()
+    node = rclpy.create_node(f"bench_{role}", namespace=namespace, start_parameter_services=False)
+    qos = sample_qos(100)
+    executor = EventsExecutor()
+    executor.add_node(node)
+    publisher = node.create_publisher(BodyMeasurement, target, qos) if target else None
+    latency = []
+
+    def on_message(msg):
+        if publisher is not None:
+            publisher.publish(msg)
+        else:
+            stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            latency.append((time.time_ns() - stamp) / 1e3)
+
+    if source:
+        node.create_subscription(BodyMeasurement, source, on_message, qos)
+    deadline = time.monotonic() + START_TIMEOUT_S
+    if role == "floor_source":            # wait for the chain, then publish at 1 kHz
+        while not (publisher.get_subscription_count() and node.count_subscribers("mid")):
+            if time.monotonic() > deadline:
+                raise SystemExit("floor: the relay did not show up")
+            executor.spin_once(timeout_sec=0.05)
+        time.sleep(1.0)
+        msg = BodyMeasurement()
+        start = time.monotonic_ns()
+        for index in range(int(duration / PERIOD_S)):
+            left = start + index * 1_000_000 - time.monotonic_ns()
+            if left > 0:
+                time.sleep(left / 1e9)
+            msg.sequence = index
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
+            publisher.publish(msg)
+        time.sleep(1.0)
+    else:
+        end = deadline + duration + 5.0
+        last = time.monotonic()
+        while time.monotonic() < end:
+            count = len(latency)
+            executor.spin_once(timeout_sec=0.05)
+            if len(latency) != count or (publisher is not None and publisher.get_subscription_count()):
+                last = time.monotonic()
+            if latency and time.monotonic() - last > 2.0:
+                break
+            if publisher is not None and not node.count_publishers(source) and time.monotonic() - last > 2.0:
+                break
+    print(json.dumps({"latency_us": latency[int(WARMUP_S / PERIOD_S):]}), flush=True)
     executor.shutdown()
     node.destroy_node()
     rclpy.shutdown()
@@ -246,10 +328,11 @@ def run(quick=False):
     costs = stage_costs(QUICK_COST_DURATION_S if quick else COST_DURATION_S)
     priority = REALTIME_PRIORITY if realtime_scheduling_allowed()[0] else 0
     result = latency(QUICK_DURATION_S if quick else DURATION_S, realtime_priority=priority)
-    events, states = result["event_latency"], result["state_latency"]
+    events = result["event_latency"]
     if not events:
         raise RuntimeError("no gait event came through")
     normal = latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S)
+    floor = floor_latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S, realtime_priority=priority)
     variant = latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S, executor="single")
     return [
         {"name": "bridge_sample_us", "value": round(costs["bridge_sample_us"], 1), "unit": "us"},
@@ -262,15 +345,12 @@ def run(quick=False):
          "value": round(percentile(result["event_received_latency"], 0.50), 1), "unit": "us"},
         {"name": "packet_to_event_received_p99_us",
          "value": round(percentile(result["event_received_latency"], 0.99), 1), "unit": "us"},
-        {"name": "packet_to_state_p50_us", "value": round(percentile(states, 0.50), 1), "unit": "us"},
-        {"name": "packet_to_state_p99_us", "value": round(percentile(states, 0.99), 1), "unit": "us"},
-        {"name": "packet_to_measurement_p50_us",
-         "value": round(percentile(result["measurement_latency"], 0.50), 1), "unit": "us"},
-        {"name": "packet_to_measurement_p99_us",
-         "value": round(percentile(result["measurement_latency"], 0.99), 1), "unit": "us"},
         {"name": "deadline_miss_pct", "value": round(result["deadline_miss_pct"], 3), "unit": "%"},
         {"name": "events_measured", "value": len(events), "unit": "events"},
         {"name": "sensing_realtime_priority", "value": priority, "unit": "SCHED_FIFO"},
+        # two rclpy hops without any work, same scheduling: the part of the latency that is rclpy's
+        {"name": "rclpy_two_hop_floor_p50_us", "value": round(percentile(floor, 0.50), 1), "unit": "us"},
+        {"name": "rclpy_two_hop_floor_p99_us", "value": round(percentile(floor, 0.99), 1), "unit": "us"},
         # the same with normal scheduling (SCHED_OTHER)
         {"name": "packet_to_event_p50_us_normal_scheduling",
          "value": round(percentile(normal["event_latency"], 0.50), 1), "unit": "us"},
@@ -290,7 +370,7 @@ def run(quick=False):
 if __name__ == "__main__":
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     role = sys.argv[1] if len(sys.argv) > 1 else "run"
-    if role in ("source", "sink"):
+    if role in ("source", "sink", "floor_source", "floor_relay", "floor_end"):
         from hopper_ros.environment import apply_realtime_priority
 
         apply_realtime_priority()            # HOPPER_REALTIME_PRIORITY of the run, as the nodes
@@ -298,6 +378,8 @@ if __name__ == "__main__":
         _source(int(sys.argv[2]), float(sys.argv[3]))
     elif role == "sink":
         _sink(sys.argv[2], float(sys.argv[3]))
+    elif role.startswith("floor_"):
+        _floor(role, sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5]))
     else:
         for figure in run(quick="--quick" in sys.argv):
             print(figure)

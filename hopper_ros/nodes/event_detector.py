@@ -7,8 +7,9 @@ pre-touchdown published ahead; the state at the event, `state.sequence` the samp
 it) and each apex also on `apex` (ApexState: height, forward speed, y, leg angle; stride_index n
 opens stride n), which stride_predictor and setpoint_scheduler consume. `diagnostics`
 (NodeDiagnostics, every `diagnostics_period`): counters (samples, untrusted_samples, track_lost,
-track_acquired, strides and one per event type) and values (detection_delay_max_s over the period,
-process_time_max_s).
+track_acquired, strides, one per event type, late_samples: states that arrived more than
+`sample_deadline` after their sample's instant, i.e. the loop's missed deadlines) and values
+(detection_delay_max_s, sample_age_max_s and process_time_max_s over the period).
 
 Parameters (read only):
   sensing_file (string): default `sensing.yaml` (config/sensing.yaml, section detector)
@@ -31,7 +32,7 @@ from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.sensing.events import EventDetector
 from hopper_ros.sensing.messages import (CounterDeltas, any_of, apex_state_msg, diagnostics_msg,
-                                         estimate_from_msg, gait_event_msg, sample_qos)
+                                         estimate_from_msg, gait_event_msg, sample_qos, to_seconds)
 from hopper_ros.sensing.samples import EventType
 
 EVENT_DEPTH = 100   # events are rare: a late subscriber of the last 0.1 s still gets them all
@@ -55,12 +56,20 @@ class EventDetectorNode(Node):
         self._deltas = CounterDeltas()
         self._delay_max = 0.0
         self._process_time_max = 0.0
+        self._deadline = config.detector.sample_deadline
+        self.late_samples = 0
+        self._age_max = 0.0
         s = config.detector
         self.get_logger().info(f"detecting gait events: rest length {self.detector.rest_length:g} m, "
                                f"pre-touchdown {s.pre_touchdown_height * 1e2:g} cm above touchdown")
 
     def _on_state(self, msg: BodyState) -> None:
         started = time.perf_counter()
+        age = time.time() - to_seconds(msg.header.stamp)      # since the sample's packet arrived (earliest)
+        if age > self._deadline:
+            self.late_samples += 1
+        if age > self._age_max:
+            self._age_max = age
         for event in self.detector.update(estimate_from_msg(msg)):
             delay = time.time() - event.time
             self._events.publish(gait_event_msg(event, delay))
@@ -73,11 +82,15 @@ class EventDetectorNode(Node):
 
     def _report(self) -> None:
         now = time.time()
-        counters = dict(self.detector.counters)
+        counters = dict(self.detector.counters, late_samples=self.late_samples)
         deltas, _ = self._deltas.update(counters, now)
-        values = {"detection_delay_max_s": self._delay_max, "process_time_max_s": self._process_time_max}
-        self._delay_max = self._process_time_max = 0.0
+        values = {"detection_delay_max_s": self._delay_max, "process_time_max_s": self._process_time_max,
+                  "sample_age_max_s": self._age_max}
+        self._delay_max = self._process_time_max = self._age_max = 0.0
         problem = self.detector.last_problem if any_of(deltas, ("track_lost",)) else ""
+        if not problem and deltas["late_samples"]:
+            problem = (f"{deltas['late_samples']} of {deltas['samples']} states came more than "
+                       f"{self._deadline * 1e3:g} ms after their sample (the loop misses its deadline)")
         self._diagnostics.publish(diagnostics_msg(self.get_fully_qualified_name(), now, counters, values, problem))
 
 

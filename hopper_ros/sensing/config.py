@@ -100,6 +100,7 @@ class DetectorSettings:
     acquire_velocity_std: float   # [m/s]
     track_velocity_std: float     # [m/s]
     max_state_spacing: float      # [s]
+    sample_deadline: float        # [s]
 
     def __post_init__(self) -> None:
         if not 0 < self.acquire_velocity_std <= self.track_velocity_std:
