@@ -84,6 +84,7 @@ class Listener:
         # process listens to 2 kHz while sharing two cores with the graph under test
         self.executor = EventsExecutor()
         self.executor.add_node(self.node)
+        self.keys = keys
         self.got = {key: [] for key in ("truth", "sim_events", "states", "events", "apex", "samples",
                                         "measurements", "diagnostics")}
         topics = [("truth", BodyState, "sim/truth"), ("sim_events", GaitEvent, "sim/events"),
@@ -96,13 +97,27 @@ class Listener:
                 self.node.create_subscription(kind, topic, self.got[key].append, qos)
 
     def wait_connected(self) -> None:
-        """Until the three nodes' topics are all matched with this listener (and with each other)."""
+        """Until the three nodes' topics are all matched with this listener and with each other: the
+        bridge's and the estimator's publishers report their matched subscriptions (the listener
+        seeing a subscription does not mean the publisher has matched it yet: a run once lost its
+        first 150 samples that way)."""
         node = self.node
         assert spin_until(self.executor, lambda: node.count_publishers("body_measurement") and
                           node.count_subscribers("body_measurement") >= 1 and node.count_publishers("body_state")
                           and node.count_subscribers("body_state") >= 1 and node.count_publishers("gait_event"))
-        end = time.monotonic() + 1.0     # let the nodes' own matches settle too
-        spin_until(self.executor, lambda: time.monotonic() > end)
+        wanted = {"/encoder_bridge": ("measurement_subscribers", 1 + ("measurements" in self.keys)),
+                  "/state_estimator": ("state_subscribers", 1 + ("states" in self.keys))}
+
+        def matched():
+            reports = {name: self.diagnostics(name) for name in wanted}
+            return all(r is not None and values_of(r)[value] >= count
+                       for (value, count), r in zip(wanted.values(), reports.values()))
+
+        if "diagnostics" in self.keys:
+            assert spin_until(self.executor, matched)
+        else:
+            end = time.monotonic() + 1.0     # no diagnostics to tell: let the nodes' own matches settle
+            spin_until(self.executor, lambda: time.monotonic() > end)
 
     def spin_for(self, duration: float) -> None:
         end = time.monotonic() + duration

@@ -13,8 +13,8 @@ BRAKE after the second apex (leg held, then the drive disabled).
 
 Commands are (mode, setpoint) with MotorCommand's modes: 0 disabled, 1 current (hip torque
 [N m]), 2 position (leg angle [rad]). `command(now)` gives the command for time `now` [s] (the
-robot's clock: event times are in it), called on every state estimate so that the motor
-driver's watchdog is fed at 1 kHz.
+robot's clock: event times are in it); the controller node sends it on every event and repeats
+it every few milliseconds to feed the motor driver's watchdog.
 """
 
 from __future__ import annotations

@@ -24,8 +24,9 @@ itself reaches the node only after the sensing chain's latency. No touchdown wit
 A MotorCommand goes out at once when an input changes it (apex, gait event, setpoint, fault) and
 is repeated every `keep_alive` otherwise (a timer), which feeds the motor driver's watchdog; the
 node needs no state estimates, so it wakes at 200 Hz instead of with every 1 kHz sample. In
-stance it is MODE_RAMP stamped with the touchdown time: the driver computes the ramp's current every SYNC period itself, so delays and
-jitter of the command stream (seven Python processes on two cores) neither shift nor stretch it; the stride phase advances on `gait_event`. The logic is in
+stance it is MODE_RAMP stamped with the touchdown time: the driver computes the ramp's current
+every SYNC period itself, so delays and jitter of the command stream (seven Python processes on
+two cores) neither shift nor stretch it; the stride phase advances on `gait_event`. The logic is in
 hopper_ros.control (no ROS); this node only connects it.
 
 Parameters (read only): model_file (model.yaml), config_file (control.yaml), experiment,
@@ -37,7 +38,6 @@ from __future__ import annotations
 
 import math
 
-from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -51,6 +51,7 @@ from hopper_ros.nodes.common import run_node
 from hopper_ros.physics.flight import touchdown_time
 from hopper_ros.physics.params import load_params
 from hopper_ros.physics.predictors import predict_stride
+from hopper_ros.sensing.messages import to_time
 
 SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -59,11 +60,6 @@ COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=R
 
 def _seconds(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
-
-
-def _stamp(seconds: float) -> Time:
-    sec, nanosec = divmod(int(round(seconds * 1e9)), 1_000_000_000)
-    return Time(sec=sec, nanosec=nanosec)
 
 
 class DeadbeatControllerNode(Node):
@@ -215,7 +211,7 @@ class DeadbeatControllerNode(Node):
                 # scheduled ahead: zero current until the predicted touchdown, then the ramp
                 mode, setpoint = MotorCommand.MODE_RAMP, plan.tau_0
                 command.duration = plan.ramp_duration
-                stamp = _stamp(self._predicted_touchdown)
+                stamp = to_time(self._predicted_touchdown)
             else:
                 command.duration = 0.0
                 if not self._cancelled_ramp:

@@ -10,7 +10,8 @@ packet is published at once (1 kHz) on
 a rejected packet is counted and dropped, never published. `diagnostics` (NodeDiagnostics, every
 `diagnostics_period`): counters (packets_received, samples_accepted, packets_lost, malformed_*,
 duplicates, reordered, sequence_jump, clock_backwards, clock_inconsistent, stream_resyncs,
-counter_wraps) and values (sample_rate_hz, loss_ratio over the period, process_time_max_s).
+counter_wraps) and values (sample_rate_hz, loss_ratio over the period, process_time_max_s,
+measurement_subscribers: the subscriptions body_measurement is matched with).
 
 Parameters (read only):
   sensing_file (string): sensing settings, default `sensing.yaml` (config/sensing.yaml)
@@ -120,6 +121,7 @@ class EncoderBridgeNode(Node):
             "sample_rate_hz": accepted / elapsed if elapsed > 0 else float("nan"),
             "loss_ratio": lost / (accepted + lost) if accepted + lost else 0.0,
             "process_time_max_s": self._process_time_max,
+            "measurement_subscribers": float(self._measurements.get_subscription_count()),
         }
         self._process_time_max = 0.0
         new_problem = any_of(deltas, ("packets_lost", *MALFORMED, *ORDER))

@@ -8,7 +8,8 @@ BodyState per missing sample, `measurement_used` false, dt from the microcontrol
 sample whose innovation fails the Mahalanobis gate is not used (`outlier_rejected`).
 `diagnostics` (NodeDiagnostics, every `diagnostics_period`): counters (measurements,
 predicted_samples, outliers_y/_z/_leg_angle, reinitialisations, stale_measurements) and values
-(sample_rate_hz, clock_offset_s, z_dot_std_m_per_s, process_time_max_s).
+(sample_rate_hz, clock_offset_s, z_dot_std_m_per_s, process_time_max_s, state_subscribers: the
+subscriptions body_state is matched with).
 
 Parameters (read only):
   sensing_file (string): default `sensing.yaml` (config/sensing.yaml, section estimator)
@@ -83,6 +84,7 @@ class StateEstimatorNode(Node):
             "clock_offset_s": self.estimator.clock.offset,
             "z_dot_std_m_per_s": self._last_z_dot_std,
             "process_time_max_s": self._process_time_max,
+            "state_subscribers": float(self._states.get_subscription_count()),
         }
         self._process_time_max = 0.0
         problem = self.estimator.last_problem if any_of(deltas, PROBLEM_COUNTERS) else ""
