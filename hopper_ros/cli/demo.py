@@ -27,13 +27,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hopper_ros.config import config_path
-from hopper_ros.environment import realtime_scheduling_allowed
+from hopper_ros.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority, realtime_scheduling_allowed
 
 HELP = "run the closed-loop Fig 5.5 demo on the simulated robot and report it"
 DEFAULT_LAUNCH = "launch/demo.yaml"
 FALLBACK_LAUNCH = "launch/demo_500hz.yaml"   # without SCHED_FIFO (config/launch/demo.yaml says why)
 STARTUP_TIMEOUT = 60.0   # [s] until the graph is up
 STOP_TIMEOUT = 20.0      # [s] for the launcher to stop everything
+MONITOR_DEPTH = 200      # queue of each topic the demo follows (events: ~10 per second)
+MONITOR_PRIORITY = 10    # SCHED_FIFO of this process with launch/demo.yaml (its nodes: 50)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -68,6 +70,9 @@ def main(args: argparse.Namespace) -> int:
         if not allowed:
             print(f"demo: SCHED_FIFO is not permitted here ({why}): running the 500 Hz graph", flush=True)
     launch_file = config_path(launch)
+    if launch == DEFAULT_LAUNCH:
+        # the monitor too, below the loop's nodes: with normal scheduling it was starved for strides
+        apply_realtime_priority({REALTIME_PRIORITY_VAR: str(MONITOR_PRIORITY)})
     log_path = out / "launch.log"
     print(f"demo: starting the graph ({launch_file.name}); node logs in {log_path}", flush=True)
     log = open(log_path, "w", encoding="utf-8")
@@ -134,11 +139,14 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
     start_up = [node.create_subscription(BodyState, "body_state", lambda m: seen.__setitem__("state", seen["state"] + 1),
                                          best_effort),
                 node.create_subscription(MotorStatus, "motor_status", on_status, best_effort)]
-    node.create_subscription(NodeDiagnostics, "diagnostics", on_diagnostics, 10)
+    # this monitor runs with normal scheduling beside a graph on SCHED_FIFO: it may not run for a
+    # while, so its queues hold seconds of the (rare) messages it follows
+    node.create_subscription(NodeDiagnostics, "diagnostics", on_diagnostics, MONITOR_DEPTH)
     node.create_subscription(ApexState, "apex_setpoint", lambda m: seen.__setitem__("setpoint", m), latched)
-    node.create_subscription(StrideCommand, "stride_command", lambda m: seen["commands"].__setitem__(m.stride_index, m), 10)
-    node.create_subscription(ApexState, "apex", seen["apexes"].append, 10)
-    node.create_subscription(GaitEvent, "gait_event", on_event, 10)
+    node.create_subscription(StrideCommand, "stride_command", lambda m: seen["commands"].__setitem__(m.stride_index, m),
+                             MONITOR_DEPTH)
+    node.create_subscription(ApexState, "apex", seen["apexes"].append, MONITOR_DEPTH)
+    node.create_subscription(GaitEvent, "gait_event", on_event, MONITOR_DEPTH)
     throw = node.create_publisher(ApexState, "sim/throw", 10)
     try:
         started = time.monotonic()
