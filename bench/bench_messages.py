@@ -15,7 +15,7 @@ import subprocess
 import sys
 import time
 
-from _common import child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
+from _common import Paced, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 COUNT = 2000          # measured messages
 QUICK_COUNT = 500
@@ -125,23 +125,16 @@ def _publish(topic, total, rate_hz):
     time.sleep(0.5)  # let the subscriber's side of the match settle too
     msg = BodyState()
     msg.header.frame_id = "ground"
-    period_ns = int(1e9 / rate_hz)
-    start = time.monotonic_ns()
-    for sequence in range(total):
-        target = start + sequence * period_ns
-        delay = target - time.monotonic_ns()
-        if delay > 0:
-            time.sleep(delay / 1e9)
+    pace = Paced(total, 1.0 / rate_hz)
+    for sequence in pace:
         msg.sequence = sequence
         msg.y = sequence * 1e-3
         now = time.monotonic_ns()
         msg.header.stamp.sec = now // 1_000_000_000
         msg.header.stamp.nanosec = now % 1_000_000_000
         publisher.publish(msg)
-    elapsed = (time.monotonic_ns() - start) / 1e9
     time.sleep(1.0)  # reliable delivery of the tail before the writer goes away
-    print(json.dumps({"sent": total, "rate_hz": (total - 1) / elapsed if elapsed else 0.0}),
-          flush=True)
+    print(json.dumps({"sent": total, "rate_hz": pace.rate_hz}), flush=True)
     node.destroy_node()
     rclpy.shutdown()
 

@@ -24,7 +24,7 @@ import threading
 import time
 from pathlib import Path
 
-from _common import child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
+from _common import Paced, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -157,20 +157,14 @@ def _publish(topic, total, rate_hz):
     time.sleep(1.0)                                   # the driver configures the drive meanwhile
     msg = MotorCommand(mode=MotorCommand.MODE_CURRENT)
     stamps = []
-    period_ns = int(1e9 / rate_hz)
-    start = time.monotonic_ns()
-    for sequence in range(total):
-        target = start + sequence * period_ns
-        delay = target - time.monotonic_ns()
-        if delay > 0:
-            time.sleep(delay / 1e9)
+    pace = Paced(total, 1.0 / rate_hz)
+    for sequence in pace:
         msg.setpoint = _torque_for(sequence, hardware)
         msg.header.stamp = node.get_clock().now().to_msg()
         now = time.time_ns()
         publisher.publish(msg)
         stamps.append(now)
-    elapsed = (time.monotonic_ns() - start) / 1e9
-    print(json.dumps({"rate_hz": (total - 1) / elapsed if elapsed else 0.0, "stamps_ns": stamps}), flush=True)
+    print(json.dumps({"rate_hz": pace.rate_hz, "stamps_ns": stamps}), flush=True)
     node.destroy_node()
     rclpy.shutdown()
 

@@ -40,7 +40,7 @@ import sys
 import time
 from pathlib import Path
 
-from _common import child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
+from _common import Paced, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -173,17 +173,14 @@ def _source(port, duration):
     send_ns, send_wall_ns = {}, {}
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         address = ("127.0.0.1", port)
-        start = time.monotonic_ns() + 200_000_000
-        for index, (sequence, data) in enumerate(datagrams):
-            left = start + index * 1_000_000 - time.monotonic_ns()
-            if left > 0:
-                time.sleep(left / 1e9)
+        pace = Paced(len(datagrams), PERIOD_S, start_delay_s=0.2)
+        for index in pace:
+            sequence, data = datagrams[index]
             send_ns[sequence] = time.monotonic_ns()
             send_wall_ns[sequence] = time.time_ns()
             sock.sendto(data, address)
-        elapsed = (time.monotonic_ns() - start) / 1e9
     time.sleep(1.0)
-    print(json.dumps({"send_ns": send_ns, "send_wall_ns": send_wall_ns, "rate_hz": (len(datagrams) - 1) / elapsed}),
+    print(json.dumps({"send_ns": send_ns, "send_wall_ns": send_wall_ns, "rate_hz": pace.rate_hz}),
           flush=True)
 
 
@@ -295,11 +292,7 @@ def _floor(role, namespace, source, target, duration):
             executor.spin_once(timeout_sec=0.05)
         time.sleep(1.0)
         msg = BodyMeasurement()
-        start = time.monotonic_ns()
-        for index in range(int(duration / PERIOD_S)):
-            left = start + index * 1_000_000 - time.monotonic_ns()
-            if left > 0:
-                time.sleep(left / 1e9)
+        for index in Paced(int(duration / PERIOD_S), PERIOD_S):
             msg.sequence = index
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
             publisher.publish(msg)
