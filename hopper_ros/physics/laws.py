@@ -183,10 +183,30 @@ class Coefficients:
         return tuple(f.name for f in fields(Coefficients) if f.name.endswith("_terms"))
 
 
+_OFF = {"torque_gain": 1.0, "torque_limit": math.inf}
+
+
+def active(c: Coefficients) -> frozenset:
+    """Names of the extra coefficients that are on in any lane (cached on the instance: the laws test it often)."""
+    cached = c.__dict__.get("_active")
+    if cached is None:
+        on = set()
+        for name in ("quadratic_drag", "flight_friction_y", "flight_friction_z", "spring_cubic", "quadratic_damping",
+                     "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness"):
+            if np.any(np.asarray(getattr(c, name)) != 0.0):
+                on.add(name)
+        for name in Coefficients.term_names():
+            if any(np.any(np.asarray(v) != 0.0) for v in getattr(c, name)):
+                on.add(name)
+        cached = frozenset(on)
+        object.__setattr__(c, "_active", cached)
+    return cached
+
+
 def _sum_terms(library, coefficients, context):
     total = 0.0
     for (_, _, _, term), c in zip(library, coefficients):
-        if np.any(np.asarray(c) != 0.0):
+        if np.ndim(c) or c != 0.0:
             total = total + np.asarray(c) * term(context)
     return total
 
@@ -205,15 +225,16 @@ def flight_acceleration(c: Coefficients, y, z, ydot, zdot):
     """Body acceleration in flight (y'', z''): (2.8) y'' = -d_h y', z'' = -g - d_v z', plus the flight effects."""
     ay = -c.flight_damping_y * ydot
     az = -c.gravity - c.flight_damping_z * zdot
-    if np.any(np.asarray(c.quadratic_drag) != 0.0):
+    on = active(c)
+    if "quadratic_drag" in on:
         speed = np.sqrt(ydot * ydot + zdot * zdot)
         ay = ay - c.quadratic_drag * speed * ydot
         az = az - c.quadratic_drag * speed * zdot
-    if np.any(np.asarray(c.flight_friction_y) != 0.0):
+    if "flight_friction_y" in on:
         ay = ay - c.flight_friction_y * smooth_sign(ydot)
-    if np.any(np.asarray(c.flight_friction_z) != 0.0):
+    if "flight_friction_z" in on:
         az = az - c.flight_friction_z * smooth_sign(zdot)
-    if any(np.any(np.asarray(v) != 0.0) for v in c.flight_y_terms + c.flight_z_terms):
+    if "flight_y_terms" in on or "flight_z_terms" in on:
         ctx = FlightContext(y, z, ydot, zdot)
         ay = ay + _sum_terms(FLIGHT_Y_TERMS, c.flight_y_terms, ctx) / c.mass
         az = az + _sum_terms(FLIGHT_Z_TERMS, c.flight_z_terms, ctx) / c.mass
@@ -238,11 +259,12 @@ def leg_force(c: Coefficients, rho, rho_dot):
     along-the-leg effects other than the discovered terms (cubic spring, quadratic damping, dry friction)."""
     x = c.rest_length - rho
     force = c.stiffness * x - c.damping * rho_dot
-    if np.any(np.asarray(c.spring_cubic) != 0.0):
+    on = active(c)
+    if "spring_cubic" in on:
         force = force + c.spring_cubic * x ** 3
-    if np.any(np.asarray(c.quadratic_damping) != 0.0):
+    if "quadratic_damping" in on:
         force = force - c.quadratic_damping * np.abs(rho_dot) * rho_dot
-    if np.any(np.asarray(c.leg_friction) != 0.0):
+    if "leg_friction" in on:
         force = force - c.leg_friction * smooth_sign(rho_dot)
     return force
 
@@ -250,15 +272,16 @@ def leg_force(c: Coefficients, rho, rho_dot):
 def hip_losses(c: Coefficients, theta_dot):
     """Friction in the hip joint, -b theta' - f tanh(theta'/w_s), added to the applied torque."""
     loss = 0.0
-    if np.any(np.asarray(c.hip_viscous) != 0.0):
+    on = active(c)
+    if "hip_viscous" in on:
         loss = loss - c.hip_viscous * theta_dot
-    if np.any(np.asarray(c.hip_friction) != 0.0):
+    if "hip_friction" in on:
         loss = loss - c.hip_friction * smooth_sign(theta_dot)
     return loss
 
 
 def has_terms(c: Coefficients, name: str) -> bool:
-    return any(np.any(np.asarray(v) != 0.0) for v in getattr(c, name))
+    return name in active(c)
 
 
 @dataclass
@@ -305,7 +328,7 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, *, co
     depth_rate = 0.0
     if compliant is None:
         compliant = np.asarray(c.ground_stiffness) > 0.0
-    if np.any(compliant):
+    if "ground_stiffness" in active(c):
         push = (spring_only - c.damping * approach) * cos - tau / rho * sin
         rate = (push - c.ground_stiffness * depth) / (c.ground_damping + c.damping * cos * cos)
         depth_rate = np.where(compliant, rate, 0.0)
@@ -355,8 +378,12 @@ def touchdown_velocity(c: Coefficients, theta, ydot, zdot):
     effects remove shares along and across the leg and add the discovered jump terms."""
     sin, cos, along, across = _leg_components(theta, ydot, zdot)
     ctx = JumpContext(along, across)
-    new_along = along * (1.0 - c.touchdown_loss_along) + _sum_terms(JUMP_TERMS, c.touchdown_along_terms, ctx)
-    new_across = across * (1.0 - c.touchdown_loss_across) + _sum_terms(JUMP_TERMS, c.touchdown_across_terms, ctx)
+    new_along = along * (1.0 - c.touchdown_loss_along)
+    new_across = across * (1.0 - c.touchdown_loss_across)
+    if has_terms(c, "touchdown_along_terms"):
+        new_along = new_along + _sum_terms(JUMP_TERMS, c.touchdown_along_terms, ctx)
+    if has_terms(c, "touchdown_across_terms"):
+        new_across = new_across + _sum_terms(JUMP_TERMS, c.touchdown_across_terms, ctx)
     return _from_components(sin, cos, new_along, new_across)
 
 
