@@ -24,10 +24,10 @@ CASES = [
     ("none", None, None, None),
     ("leg_friction", {"leg_friction": True}, "leg_friction", 2.0),
     ("ground_compliance", {"ground_compliance": True}, "ground_compliance", 60000.0),
-    ("touchdown_impact", {"touchdown_impact": True}, "touchdown_impact", 0.06),
+    ("touchdown_loss_across", {"touchdown_loss_across": True}, "touchdown_loss_across", 0.06),
     ("torque_saturation", {"torque_saturation": True}, "torque_saturation", 4.0),
     ("actuation_delay", {"actuation_delay": True}, "actuation_delay", 0.004),
-    ("boom_gravity", {"boom_gravity": {"effective_gravity": 10.6}}, "boom_gravity", 10.6),
+    ("effective_gravity", {"effective_gravity": {"g": 10.6}}, "effective_gravity", 10.6),
 ]
 
 

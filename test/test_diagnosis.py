@@ -16,10 +16,10 @@ STRIDES = 20
 CASES = {
     "leg_friction": ({"leg_friction": True}, "leg_friction", 2.0),
     "ground_compliance": ({"ground_compliance": True}, "ground_compliance", 60000.0),
-    "touchdown_impact": ({"touchdown_impact": True}, "touchdown_impact", 0.06),
+    "touchdown_loss_across": ({"touchdown_loss_across": True}, "touchdown_loss_across", 0.06),
     "torque_saturation": ({"torque_saturation": True}, "torque_saturation", 4.0),
     "actuation_delay": ({"actuation_delay": True}, "actuation_delay", 0.004),
-    "boom_gravity": ({"boom_gravity": {"effective_gravity": 10.6}}, "boom_gravity", 10.6),
+    "effective_gravity": ({"effective_gravity": {"g": 10.6}}, "effective_gravity", 10.6),
 }
 
 
@@ -59,7 +59,7 @@ def test_names_effect_and_magnitude(results, case):
     first = r["chosen"][0]
     assert first["name"] == expected, r["verdict"]
     assert abs(first["magnitude"] - truth) <= 0.2 * truth, (first["magnitude"], truth)
-    if case != "boom_gravity":   # known limitation: g's fit leaves a flight-damping correction (docs/diagnosis.md)
+    if case != "effective_gravity":   # known limitation: g's fit leaves a flight-damping correction (docs/diagnosis.md)
         assert len(r["chosen"]) == 1, r["verdict"]
     # the chosen effect makes the held-out predictions better
     assert r["after"]["E_v"] < r["before"]["E_v"]
