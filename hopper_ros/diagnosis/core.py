@@ -9,13 +9,12 @@ training strides, scored on the held-out ones (trajectory SSE and the next apex,
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
-from scipy.optimize import minimize_scalar
 
 from hopper_ros.config import load_yaml
 from hopper_ros.identification.recordings import Recording
@@ -44,7 +43,8 @@ class Settings:
     discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
     tie: float = 0.1                 # reductions this close (share of the best) cannot be told apart
     locate_threshold: float = 2.0    # residual over noise for a site to stand out
-    screen: int = 10                 # candidates carried into later rounds besides those at located sites
+    screen: int = 8                  # candidates the screening passes on to the full search
+    screen_strides: int = 24         # strides the screening uses
     liftoff_window: float = 0.003
 
 
@@ -76,7 +76,8 @@ class Candidate:
     build: Callable               # (variant, value) -> variant
     physical: Callable            # value -> magnitude in `unit`
     separate: str = ""
-    plausible: tuple = (-math.inf, math.inf)
+    plausible: tuple = (0.0, math.inf)
+    off: float = 0.0
     discovery: Discovery | None = None
     equation: str = ""
 
@@ -104,7 +105,7 @@ def library_candidate(effect: library.Effect, base: laws.Coefficients) -> Candid
 
     return Candidate(effect.name, effect.kind, effect.family, effect.site, effect.primary.unit, effect.words,
                      low, high, build, effect.physical, effect.separate, effect.primary.plausible,
-                     equation=effect.equation)
+                     off=library.SENSOR_OFF.get(effect.primary.coefficient, 0.0), equation=effect.equation)
 
 
 def discovered_candidate(found: Discovery) -> Candidate:
@@ -114,7 +115,8 @@ def discovered_candidate(found: Discovery) -> Candidate:
         return variant.with_changes(coefficients={found.field: new})
 
     return Candidate(f"discovered_{found.site}", "discovered", "discovered", found.site, "x fitted terms",
-                     found.words(), 0.0, 2.0, build, float, "", discovery=found,
+                     found.words(), 0.0, 2.0, build, float,
+                     "a force plate, or strides that lengthen the phase where the terms act", discovery=found,
                      equation=" + ".join(f"{c:+.4g} {k}" for k, c, _, _ in found.terms()))
 
 
@@ -162,25 +164,22 @@ def rank_candidates(data: StrideData, current: Variant, candidates: list[Candida
         sse = sim["sse"][row:row + len(grid)]
         pred_grid = {k: v[row:row + len(grid)] for k, v in sim["pred"].items()}
         row += len(grid)
-        logs = np.log(np.maximum(sse, 1e-12))
-        per_stride = PchipInterpolator(grid, logs, axis=0)
+        floor = 0.5 * sse.min(axis=0)
         held = np.empty(n)
         held_values = np.empty(n)
         fold_values = []
 
         def fit(columns):
-            total = PchipInterpolator(grid, np.log(np.maximum(sse[:, columns].sum(axis=1), 1e-12)))
-            best = int(np.argmin(total(grid)))
-            lo, hi = grid[max(0, best - 1)], grid[min(len(grid) - 1, best + 1)]
-            return float(minimize_scalar(total, bounds=(lo, hi), method="bounded").x) if hi > lo else float(grid[best])
+            return _vertex(grid, sse[:, columns].sum(axis=1))
 
         for f in np.unique(fold):
             train = fold != f
             m = fit(train)
             fold_values.append(m)
-            held[~train] = np.exp(per_stride(m)[~train])
+            held[~train] = np.maximum(_quadratic_at(grid, sse[:, ~train], m), floor[~train])
             held_values[~train] = m
         value = fit(np.ones(n, bool))
+        fit_total = float(_quadratic_at(grid, sse.sum(axis=1)[:, None], value)[0])
         d = np.log(base_sse / held)
         sd = d.std(ddof=1)
         t_stat = float(d.mean() / (sd / math.sqrt(n))) if sd > 0 else 0.0
@@ -190,12 +189,37 @@ def rank_candidates(data: StrideData, current: Variant, candidates: list[Candida
         errors = _errors(data, _interp_pred(grid, pred_grid, held_values))
         results.append({"name": c.name, "candidate": c, "value": value, "fold_values": fold_values,
                         "magnitude": c.physical(value), "reduction": float(reduction), "t": t_stat,
+                        "fit_reduction": float(1.0 - max(fit_total, 0.0) / base_sse.sum()),
                         "delta_bic": float(-2 * llr + math.log(n_eff)), "held_sse": held, "errors": errors,
                         "grid": grid})
     for r in results:
         _guards(r, base_errors, settings)
     results.sort(key=lambda r: -r["reduction"])
     return results
+
+
+def _vertex(grid: np.ndarray, values: np.ndarray) -> float:
+    """Where a sampled SSE is lowest: the vertex of the parabola through the best grid point and its neighbours
+    (an SSE is quadratic in a magnitude near its minimum; its logarithm is not)."""
+    k = int(np.argmin(values))
+    if k == 0 or k == len(grid) - 1:
+        return float(grid[k])
+    x, y = grid[k - 1:k + 2], values[k - 1:k + 2]
+    a = np.polyfit(x, y, 2)
+    if a[0] <= 0:
+        return float(grid[k])
+    return float(np.clip(-a[1] / (2 * a[0]), x[0], x[2]))
+
+
+def _quadratic_at(grid: np.ndarray, values: np.ndarray, x: float) -> np.ndarray:
+    """Columns of `values` (grid x columns) interpolated at x through the three nearest grid points."""
+    k = int(np.clip(np.searchsorted(grid, x), 1, len(grid) - 2))
+    xs = grid[k - 1:k + 2]
+    out = 0.0
+    for j in range(3):
+        others = [xs[i] for i in range(3) if i != j]
+        out = out + values[k - 1 + j] * ((x - others[0]) * (x - others[1]) / ((xs[j] - others[0]) * (xs[j] - others[1])))
+    return out
 
 
 def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
@@ -214,8 +238,8 @@ def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
     if sum(e.values()) > sum(b.values()) * (1 - settings.apex_improvement):
         why.append("the next apex is not predicted better")
     c = r["candidate"]
-    if c.kind == "sensor" and not (c.plausible[0] <= r["magnitude"] <= c.plausible[1]):
-        why.append(f"{r['magnitude']:.4g} {c.unit} is not a magnitude a real sensor has")
+    if c.kind == "sensor" and not (c.plausible[0] <= abs(r["magnitude"] - c.off) <= c.plausible[1]):
+        why.append(f"{r['magnitude']:.4g} {c.unit} is not a fault a real sensor has and this data resolves")
     r["rejected"] = why
     r["significant"] = not why
 
@@ -231,12 +255,15 @@ def correlation_length(resid: np.ndarray) -> float:
 
 
 def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[dict]]:
-    """The accepted effect of a round and the ones it cannot be told apart from."""
-    ok = [r for r in ranking if r["significant"]]
-    physics = [r for r in ranking if r["candidate"].kind == "physics"]
-    best_physics = max((r["reduction"] for r in physics), default=0.0)
+    """The accepted effect of a round and those it cannot be told apart from on this data.
+
+    A sensor fault must beat the best physics effect, a discovered term set the best library effect,
+    by a margin; one that passed its guards but not the margin, or an effect of another family, within
+    `tie` of the accepted one, is reported beside it as not separable."""
+    passed = [r for r in ranking if r["significant"]]
+    best_physics = max((r["reduction"] for r in ranking if r["candidate"].kind == "physics"), default=0.0)
     best_library = max((r["reduction"] for r in ranking if r["candidate"].kind != "discovered"), default=0.0)
-    for r in ok:
+    for r in passed:
         c = r["candidate"]
         if c.kind == "sensor" and r["reduction"] < best_physics + settings.sensor_margin * r["reduction"]:
             r["significant"] = False
@@ -248,19 +275,76 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     if not ok:
         return None, []
     top = max(ok, key=lambda r: r["reduction"])
-    ties = [r for r in ok if r is not top and r["candidate"].family != top["candidate"].family
+    ties = [r for r in passed if r is not top and r["candidate"].family != top["candidate"].family
             and r["reduction"] >= top["reduction"] * (1 - settings.tie)]
     return top, ties
 
 
-def _refine(data, current, top, settings, base_sse, base_errors):
-    c = top["candidate"]
-    step = (c.high - c.low) / max(settings.grid - 1, 1)
-    fine = np.linspace(max(c.low, top["value"] - step), min(c.high, top["value"] + step), settings.grid)
-    refined = rank_candidates(data, current, [c], settings, base_sse, base_errors, grids={c.name: fine})[0]
-    if refined["significant"] and refined["reduction"] >= top["reduction"] - 0.01:
-        return refined
-    return top
+def _screen(data: StrideData, current: Variant, candidates: list[Candidate], settings: Settings,
+            located: set) -> list[Candidate]:
+    """The candidates worth a full search: the best by trajectory reduction on a subset of strides
+    (coarse grid), plus every candidate acting where locate sees a residual."""
+    n = len(data.strides)
+    if len(candidates) <= settings.screen:
+        return candidates
+    index = np.linspace(0, n - 1, min(n, settings.screen_strides)).round().astype(int)
+    sub = dataclasses.replace(data, strides=data.strides.subset(index))
+    first = simulate_variants(sub, [current])
+    errors = _errors(sub, {k: v[0] for k, v in first["pred"].items()})
+    ranked = rank_candidates(sub, current, candidates, dataclasses.replace(settings, grid=5), first["sse"][0], errors)
+    ranked.sort(key=lambda r: -r["fit_reduction"])
+    keep = {r["name"] for r in ranked[:settings.screen]}
+    keep |= {c.name for c in candidates if c.kind != "sensor" and set(LOCATED_SITES[c.site]) & located
+             and any(r["name"] == c.name and r["reduction"] > 0 for r in ranked)}
+    return [c for c in candidates if c.name in keep]
+
+
+def _refine(data, current, ranking, settings, base_sse, base_errors, exact: int = 12, fine: int = 2) -> list[dict]:
+    """The best of a ranking scored from strides simulated at their fitted magnitudes (no interpolation), then
+    the best two fitted again on a fine grid around their magnitudes."""
+    best = [r for r in ranking[:exact] if r["reduction"] > -0.5]
+    best += [r for r in ranking[exact:] if r["candidate"].kind == "discovered"]
+    if not best:
+        return ranking
+    _evaluate_exactly(data, current, best, settings, base_sse, base_errors)
+    ranking = sorted(ranking, key=lambda r: -r["reduction"])
+    grids = {}
+    for r in ranking[:fine]:
+        step = r["grid"][1] - r["grid"][0]
+        c = r["candidate"]
+        grids[c.name] = np.linspace(max(c.low, r["value"] - step), min(c.high, r["value"] + step), settings.grid)
+    refined = rank_candidates(data, current, [r["candidate"] for r in ranking[:fine]], settings, base_sse,
+                              base_errors, grids=grids)
+    _evaluate_exactly(data, current, refined, settings, base_sse, base_errors)
+    by_name = {r["name"]: r for r in refined}
+    out = [by_name[r["name"]] if r["name"] in by_name and by_name[r["name"]]["reduction"] > r["reduction"] else r
+           for r in ranking]
+    out.sort(key=lambda r: -r["reduction"])
+    return out
+
+
+def _evaluate_exactly(data, current, results, settings, base_sse, base_errors) -> None:
+    """Held-out scores of fitted candidates from strides simulated at their fold magnitudes (no interpolation)."""
+    fold = _folds(len(data.strides), settings.folds)
+    folds = list(np.unique(fold))
+    variants = [r["candidate"].build(current, float(v)) for r in results for v in r["fold_values"]]
+    sim = simulate_variants(data, variants)
+    idx = np.array([folds.index(f) for f in fold])
+    cols = np.arange(len(fold))
+    n = len(fold)
+    for k, r in enumerate(results):
+        rows = k * len(folds) + idx
+        held = sim["sse"][rows, cols]
+        pred = {key: v[rows, cols] for key, v in sim["pred"].items()}
+        d = np.log(base_sse / held)
+        sd = d.std(ddof=1)
+        r["held_sse"] = held
+        r["t"] = float(d.mean() / (sd / math.sqrt(n))) if sd > 0 else 0.0
+        r["reduction"] = float(1.0 - held.sum() / base_sse.sum())
+        n_eff = data.sample_count / data.corr_length
+        r["delta_bic"] = float(-2 * 0.5 * n_eff * math.log(base_sse.sum() / held.sum()) + math.log(n_eff))
+        r["errors"] = _errors(data, pred)
+        _guards(r, base_errors, settings)
 
 
 def _held_out_variants(data: StrideData, base: Variant, chosen: list[dict], fold: np.ndarray) -> dict:
@@ -292,32 +376,24 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     base_errors = current_errors = _errors(data, {k: v[0] for k, v in base_sim["pred"].items()})
     chosen, rounds, ties_all, discoveries = [], [], [], []
     first_location = None
-    previous: list[dict] = []
     for round_index in range(settings.max_effects):
         locations, sets = locate(data, current)
         if first_location is None:
             first_location = locations
         located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
         taken = {r["name"] for r in chosen}
-        cands = []
-        keep = {r["name"] for r in previous[:settings.screen]}
-        for effect in library.LIBRARY + library.SENSORS:
-            if effect.name in taken:
-                continue
-            shows = set(LOCATED_SITES[effect.site])
-            if round_index == 0 or effect.name in keep or shows & located or (effect.kind == "sensor" and located):
-                cands.append(library_candidate(effect, current.coefficients))
+        cands = [library_candidate(e, current.coefficients) for e in library.LIBRARY + library.SENSORS
+                 if e.name not in taken]
+        cands = _screen(data, current, cands, settings, located)
         for site in sorted(located):
             found = discover_site(site, sets)
             if found is not None and f"discovered_{site}" not in taken:
                 discoveries.append(found)
                 cands.append(discovered_candidate(found))
         ranking = rank_candidates(data, current, cands, settings, current_sse, current_errors)
+        ranking = _refine(data, current, ranking, settings, current_sse, current_errors)
         top, ties = _choose(ranking, settings)
-        if top is not None:
-            top = _refine(data, current, top, settings, current_sse, current_errors)
         rounds.append(ranking)
-        previous = ranking
         if top is None:
             break
         top["ties"] = ties

@@ -27,7 +27,7 @@ class Parameter:
     coefficient: str        # the `laws.Coefficients` field (or sensor key) it sets
     relative: bool = False  # bounds are factors of the model's own coefficient
     inverse: bool = False   # searched as 1/value (a limit or a stiffness whose "off" is infinity)
-    plausible: tuple = (-math.inf, math.inf)   # what a real robot/sensor could have (sensor guard)
+    plausible: tuple = (0.0, math.inf)   # |value - off| a real sensor could have and the data resolve (sensor guard)
 
 
 @dataclass(frozen=True)
@@ -197,18 +197,18 @@ def _sensor(channel, op, low, high, unit, plausible, words, base=0.0):
 
 
 SENSORS: tuple[Effect, ...] = (
-    _sensor("z", "delay", 0.0, 0.01, "s", (0.0, 0.01), "the height channel lags"),
-    _sensor("y", "delay", 0.0, 0.01, "s", (0.0, 0.01), "the forward position channel lags"),
-    _sensor("theta", "delay", 0.0, 0.01, "s", (0.0, 0.01), "the leg angle channel lags"),
-    _sensor("z", "scale", 0.9, 1.1, "", (0.95, 1.05), "the height channel is scaled (boom length or encoder "
+    _sensor("z", "delay", 0.0, 0.01, "s", (0.001, 0.01), "the height channel lags"),
+    _sensor("y", "delay", 0.0, 0.01, "s", (0.001, 0.01), "the forward position channel lags"),
+    _sensor("theta", "delay", 0.0, 0.01, "s", (0.001, 0.01), "the leg angle channel lags"),
+    _sensor("z", "scale", 0.9, 1.1, "", (0.005, 0.05), "the height channel is scaled (boom length or encoder "
             "resolution wrong)"),
-    _sensor("y", "scale", 0.9, 1.1, "", (0.95, 1.05), "the forward position channel is scaled (boom length or "
+    _sensor("y", "scale", 0.9, 1.1, "", (0.005, 0.05), "the forward position channel is scaled (boom length or "
             "encoder resolution wrong)"),
-    _sensor("theta", "scale", 0.9, 1.1, "", (0.95, 1.05), "the leg angle channel is scaled (gear ratio or "
+    _sensor("theta", "scale", 0.9, 1.1, "", (0.005, 0.05), "the leg angle channel is scaled (gear ratio or "
             "encoder resolution wrong)"),
-    _sensor("z", "offset", -0.015, 0.015, "m", (-0.015, 0.015), "the height channel is offset (boom height or "
+    _sensor("z", "offset", -0.015, 0.015, "m", (0.001, 0.015), "the height channel is offset (boom height or "
             "ground level wrong)"),
-    _sensor("theta", "offset", -0.06, 0.06, "rad", (-0.06, 0.06), "the leg angle channel is offset (encoder zero "
+    _sensor("theta", "offset", -0.06, 0.06, "rad", (0.005, 0.06), "the leg angle channel is offset (encoder zero "
             "wrong)"),
 )
 SENSOR_KEYS = tuple(e.primary.coefficient for e in SENSORS)
