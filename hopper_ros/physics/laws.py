@@ -33,6 +33,8 @@ def ramp_torque(t_stance, tau_0, ramp_duration):
     Broadcasts over arrays of times (from touchdown), torques and ramp durations; the one ramp
     of the package.
     """
+    if isinstance(t_stance, float) and isinstance(tau_0, float) and isinstance(ramp_duration, float):
+        return -tau_0 * (1.0 - t_stance / ramp_duration) if 0.0 <= t_stance < ramp_duration else 0.0
     t = np.asarray(t_stance, dtype=float)
     t_f = np.asarray(ramp_duration, dtype=float)
     inside = (t >= 0.0) & (t < t_f)
@@ -42,6 +44,8 @@ def ramp_torque(t_stance, tau_0, ramp_duration):
 
 def smooth_sign(v, speed=SMOOTH_SPEED):
     """sign(v), smoothed over |v| < `speed` so that dry friction integrates."""
+    if isinstance(v, float):
+        return math.tanh(v / speed)
     return np.tanh(np.asarray(v) / speed)
 
 
@@ -311,10 +315,11 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, *, co
     """
     dy = y - toe_y
     hz = z - c.ground_height + depth
-    rho = np.sqrt(dy * dy + hz * hz)
+    scalar = isinstance(dy, float) and isinstance(hz, float)
+    rho = math.sqrt(dy * dy + hz * hz) if scalar else np.sqrt(dy * dy + hz * hz)
     sin, cos = -dy / rho, hz / rho
     approach = -sin * ydot + cos * zdot                     # rho' with the toe at rest
-    theta = np.arctan2(-dy, hz)
+    theta = math.atan2(-dy, hz) if scalar else np.arctan2(-dy, hz)
     theta_dot = (-ydot * hz + dy * zdot) / (rho * rho)
     tau = torque + hip_losses(c, theta_dot)
     extra_leg = has_terms(c, "leg_terms")
@@ -331,7 +336,7 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, *, co
     if "ground_stiffness" in active(c):
         push = (spring_only - c.damping * approach) * cos - tau / rho * sin
         rate = (push - c.ground_stiffness * depth) / (c.ground_damping + c.damping * cos * cos)
-        depth_rate = np.where(compliant, rate, 0.0)
+        depth_rate = (rate if compliant else 0.0) if scalar else np.where(compliant, rate, 0.0)
     rho_dot = approach + cos * depth_rate
     force = spring_only - c.damping * rho_dot
     across = tau / rho
@@ -349,6 +354,8 @@ def actuator_torque(c: Coefficients, command):
     The delay and the first-order lag act in time (the integrators: `torque_delay`, `torque_lag`).
     """
     tau = c.torque_gain * command + c.torque_offset
+    if isinstance(tau, float) and isinstance(c.torque_limit, float):
+        return min(max(tau, -c.torque_limit), c.torque_limit)
     return np.clip(tau, -c.torque_limit, c.torque_limit)
 
 
