@@ -41,7 +41,7 @@ class Settings:
     apex_improvement: float = 0.03   # ... and their sum must fall by at least this share
     sensor_margin: float = 0.15      # a sensor effect must beat the best physics effect's reduction by this share
     discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
-    tie: float = 0.1                 # reductions this close (share of the best) cannot be told apart
+    tie_t: float = 2.5               # another family's effect fitting held-out strides not worse by this t: a look-alike
     locate_threshold: float = 2.0    # residual over noise for a site to stand out
     screen: int = 8                  # candidates the screening passes on to the full search
     screen_strides: int = 24         # strides the screening uses
@@ -258,8 +258,9 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     """The accepted effect of a round and those it cannot be told apart from on this data.
 
     A sensor fault must beat the best physics effect, a discovered term set the best library effect,
-    by a margin; one that passed its guards but not the margin, or an effect of another family, within
-    `tie` of the accepted one, is reported beside it as not separable."""
+    by a margin. An effect of another family (or one that passed its guards but not a margin) whose held-out
+    fit is not worse than the accepted one's by a one-sided t of `tie_t` over strides is reported beside it
+    as not separable."""
     passed = [r for r in ranking if r["significant"]]
     best_physics = max((r["reduction"] for r in ranking if r["candidate"].kind == "physics"), default=0.0)
     best_library = max((r["reduction"] for r in ranking if r["candidate"].kind != "discovered"), default=0.0)
@@ -276,8 +277,15 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
         return None, []
     top = max(ok, key=lambda r: r["reduction"])
     ties = [r for r in passed if r is not top and r["candidate"].family != top["candidate"].family
-            and r["reduction"] >= top["reduction"] * (1 - settings.tie)]
+            and _paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t]
     return top, ties
+
+
+def _paired_t(worse: np.ndarray, better: np.ndarray) -> float:
+    """One-sided t over strides that `worse` fits held-out strides worse than `better`."""
+    d = np.log(worse / better)
+    sd = d.std(ddof=1)
+    return float(d.mean() / (sd / math.sqrt(len(d)))) if sd > 0 else (math.inf if d.mean() > 0 else 0.0)
 
 
 def _screen(data: StrideData, current: Variant, candidates: list[Candidate], settings: Settings,
