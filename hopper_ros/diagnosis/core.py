@@ -77,7 +77,8 @@ class Candidate:
     physical: Callable            # value -> magnitude in `unit`
     separate: str = ""
     plausible: tuple = (0.0, math.inf)
-    off: float = 0.0
+    off: float = 0.0              # the magnitude (physical) at which a sensor fault is off
+    origin: float = 0.0           # the search value at which the candidate changes nothing
     discovery: Discovery | None = None
     equation: str = ""
 
@@ -96,6 +97,13 @@ LOCATED_SITES = {  # library site -> located sites where it shows first
 
 def library_candidate(effect: library.Effect, base: laws.Coefficients) -> Candidate:
     low, high = effect.search_bounds(base)
+    p = effect.primary
+    if p.coefficient == "toe_mass":
+        origin = float(base.mass) * (1.0 / float(base.collision_factor) - 1.0)
+    elif p.coefficient in laws.Coefficients.scalar_names():
+        origin = effect.search_value(float(getattr(base, p.coefficient)))
+    else:
+        origin = library.SENSOR_OFF.get(p.coefficient, 0.0)
 
     def build(variant: Variant, value: float, effect=effect) -> Variant:
         changes = effect.coefficients(value, variant.coefficients)
@@ -105,7 +113,7 @@ def library_candidate(effect: library.Effect, base: laws.Coefficients) -> Candid
 
     return Candidate(effect.name, effect.kind, effect.family, effect.site, effect.primary.unit, effect.words,
                      low, high, build, effect.physical, effect.separate, effect.primary.plausible,
-                     off=library.SENSOR_OFF.get(effect.primary.coefficient, 0.0), equation=effect.equation)
+                     off=library.SENSOR_OFF.get(p.coefficient, 0.0), origin=origin, equation=effect.equation)
 
 
 def discovered_candidate(found: Discovery) -> Candidate:
@@ -121,6 +129,17 @@ def discovered_candidate(found: Discovery) -> Candidate:
 
 
 # ---------------------------------------------------------------------------- ranking
+
+
+def search_grid(c: Candidate, n: int) -> np.ndarray:
+    """n magnitudes between the bounds, denser near the candidate's "off" value (small effects are common)."""
+    origin = float(np.clip(c.origin, c.low, c.high))
+    span = c.high - c.low
+    below = int(round((n - 1) * (origin - c.low) / span)) if span > 0 else 0
+    above = n - 1 - below
+    u_below = np.linspace(1.0, 0.0, below + 1)[:-1] ** 2 if below else np.empty(0)
+    u_above = np.linspace(0.0, 1.0, above + 1)[1:] ** 2 if above else np.empty(0)
+    return np.concatenate([origin - (origin - c.low) * u_below, [origin], origin + (c.high - origin) * u_above])
 
 
 def _folds(n: int, k: int) -> np.ndarray:
@@ -153,7 +172,7 @@ def rank_candidates(data: StrideData, current: Variant, candidates: list[Candida
     on the held-out ones. Returns result dicts, best first."""
     if not candidates:
         return []
-    grids = grids or {c.name: np.linspace(c.low, c.high, settings.grid) for c in candidates}
+    grids = grids or {c.name: search_grid(c, settings.grid) for c in candidates}
     variants = [c.build(current, float(v)) for c in candidates for v in grids[c.name]]
     sim = simulate_variants(data, variants)
     n = sim["sse"].shape[1]
@@ -202,13 +221,13 @@ def _vertex(grid: np.ndarray, values: np.ndarray) -> float:
     """Where a sampled SSE is lowest: the vertex of the parabola through the best grid point and its neighbours
     (an SSE is quadratic in a magnitude near its minimum; its logarithm is not)."""
     k = int(np.argmin(values))
-    if k == 0 or k == len(grid) - 1:
-        return float(grid[k])
-    x, y = grid[k - 1:k + 2], values[k - 1:k + 2]
+    j = min(max(k, 1), len(grid) - 2)
+    x, y = grid[j - 1:j + 2], values[j - 1:j + 2]
     a = np.polyfit(x, y, 2)
     if a[0] <= 0:
         return float(grid[k])
-    return float(np.clip(-a[1] / (2 * a[0]), x[0], x[2]))
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    return float(np.clip(-a[1] / (2 * a[0]), lo, hi))
 
 
 def _quadratic_at(grid: np.ndarray, values: np.ndarray, x: float) -> np.ndarray:
@@ -258,12 +277,12 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     """The accepted effect of a round and those it cannot be told apart from on this data.
 
     A sensor fault must beat the best physics effect, a discovered term set the best library effect,
-    by a margin. An effect of another family (or one that passed its guards but not a margin) whose held-out
+    by a margin. Any other effect that passed its guards (with or without a margin) whose held-out
     fit is not worse than the accepted one's by a one-sided t of `tie_t` over strides is reported beside it
     as not separable."""
     passed = [r for r in ranking if r["significant"]]
-    best_physics = max((r["reduction"] for r in ranking if r["candidate"].kind == "physics"), default=0.0)
-    best_library = max((r["reduction"] for r in ranking if r["candidate"].kind != "discovered"), default=0.0)
+    best_physics = max((r["reduction"] for r in passed if r["candidate"].kind == "physics"), default=0.0)
+    best_library = max((r["reduction"] for r in passed if r["candidate"].kind != "discovered"), default=0.0)
     for r in passed:
         c = r["candidate"]
         if c.kind == "sensor" and r["reduction"] < best_physics + settings.sensor_margin * r["reduction"]:
@@ -276,8 +295,7 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     if not ok:
         return None, []
     top = max(ok, key=lambda r: r["reduction"])
-    ties = [r for r in passed if r is not top and r["candidate"].family != top["candidate"].family
-            and _paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t]
+    ties = [r for r in passed if r is not top and _paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t]
     return top, ties
 
 
@@ -318,9 +336,9 @@ def _refine(data, current, ranking, settings, base_sse, base_errors, exact: int 
     ranking = sorted(ranking, key=lambda r: -r["reduction"])
     grids = {}
     for r in ranking[:fine]:
-        step = r["grid"][1] - r["grid"][0]
-        c = r["candidate"]
-        grids[c.name] = np.linspace(max(c.low, r["value"] - step), min(c.high, r["value"] + step), settings.grid)
+        grid, c = r["grid"], r["candidate"]
+        k = int(np.clip(np.searchsorted(grid, r["value"]), 1, len(grid) - 1))
+        grids[c.name] = np.linspace(grid[k - 1], grid[k], settings.grid)
     refined = rank_candidates(data, current, [r["candidate"] for r in ranking[:fine]], settings, base_sse,
                               base_errors, grids=grids)
     _evaluate_exactly(data, current, refined, settings, base_sse, base_errors)
