@@ -41,7 +41,8 @@ class Settings:
     apex_improvement: float = 0.03   # ... and their sum must fall by at least this share
     sensor_margin: float = 0.15      # a sensor effect must beat the best physics effect's reduction by this share
     discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
-    tie_t: float = 2.5               # another family's effect fitting held-out strides not worse by this t: a look-alike
+    tie_t: float = 2.5               # an effect fitting held-out strides not worse by this t is a look-alike ...
+    tie_share: float = 0.02          # ... and so is one whose reduction is within this share of the best's
     locate_threshold: float = 2.0    # residual over noise for a site to stand out
     screen: int = 8                  # candidates the screening passes on to the full search
     screen_strides: int = 24         # strides the screening uses
@@ -295,7 +296,8 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     if not ok:
         return None, []
     top = max(ok, key=lambda r: r["reduction"])
-    ties = [r for r in passed if r is not top and _paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t]
+    ties = [r for r in passed if r is not top and (_paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t
+                                                    or r["reduction"] >= top["reduction"] * (1 - settings.tie_share))]
     return top, ties
 
 
@@ -325,28 +327,24 @@ def _screen(data: StrideData, current: Variant, candidates: list[Candidate], set
     return [c for c in candidates if c.name in keep]
 
 
-def _refine(data, current, ranking, settings, base_sse, base_errors, exact: int = 12, fine: int = 2) -> list[dict]:
-    """The best of a ranking scored from strides simulated at their fitted magnitudes (no interpolation), then
-    the best two fitted again on a fine grid around their magnitudes."""
-    best = [r for r in ranking[:exact] if r["reduction"] > -0.5]
-    best += [r for r in ranking[exact:] if r["candidate"].kind == "discovered"]
-    if not best:
-        return ranking
-    _evaluate_exactly(data, current, best, settings, base_sse, base_errors)
-    ranking = sorted(ranking, key=lambda r: -r["reduction"])
+def _refine(data, current, ranking, settings, base_sse, base_errors, exact: int = 12) -> list[dict]:
+    """Every candidate again on a fine grid between the neighbours of its best grid value (an SSE is not
+    parabolic where an effect switches on, e.g. a torque limit), then the best scored from strides simulated
+    at their fold magnitudes (no interpolation)."""
     grids = {}
-    for r in ranking[:fine]:
+    for r in ranking:
         grid, c = r["grid"], r["candidate"]
-        k = int(np.clip(np.searchsorted(grid, r["value"]), 1, len(grid) - 1))
-        grids[c.name] = np.linspace(grid[k - 1], grid[k], settings.grid)
-    refined = rank_candidates(data, current, [r["candidate"] for r in ranking[:fine]], settings, base_sse,
-                              base_errors, grids=grids)
-    _evaluate_exactly(data, current, refined, settings, base_sse, base_errors)
-    by_name = {r["name"]: r for r in refined}
-    out = [by_name[r["name"]] if r["name"] in by_name and by_name[r["name"]]["reduction"] > r["reduction"] else r
-           for r in ranking]
-    out.sort(key=lambda r: -r["reduction"])
-    return out
+        k = int(np.argmin(np.abs(grid - r["value"])))
+        grids[c.name] = np.linspace(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)], settings.grid)
+    refined = {r["name"]: r for r in rank_candidates(data, current, [r["candidate"] for r in ranking], settings,
+                                                       base_sse, base_errors, grids=grids)}
+    ranking = [refined[r["name"]] if refined[r["name"]]["fit_reduction"] > r["fit_reduction"] else r
+               for r in ranking]
+    ranking.sort(key=lambda r: -r["fit_reduction"])
+    best = ranking[:exact] + [r for r in ranking[exact:] if r["candidate"].kind == "discovered"]
+    _evaluate_exactly(data, current, best, settings, base_sse, base_errors)
+    ranking.sort(key=lambda r: -r["reduction"])
+    return ranking
 
 
 def _evaluate_exactly(data, current, results, settings, base_sse, base_errors) -> None:
