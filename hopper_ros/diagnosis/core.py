@@ -148,11 +148,17 @@ def _folds(n: int, k: int) -> np.ndarray:
 
 
 def _errors(data: StrideData, pred: dict) -> dict:
+    """Mean E_p, E_v, E_t (4.1)-(4.3) of the next apex over the strides the model completes; `fallen` counts
+    the strides it does not (their errors cannot be computed: a model that drops strides is not better)."""
     s = data.strides
     ep = position_error_pct(s.next_apex_height, s.stride_length, pred["height"], pred["length"])
     ev = velocity_error_pct(s.next_forward_speed, pred["speed"])
     et = time_error_pct(s.stride_time, pred["time"])
-    return {"E_p": float(np.nanmean(ep)), "E_v": float(np.nanmean(ev)), "E_t": float(np.nanmean(et))}
+    done = np.isfinite(ep) & np.isfinite(ev) & np.isfinite(et)
+    if not done.any():
+        return {"E_p": math.inf, "E_v": math.inf, "E_t": math.inf, "fallen": int(done.size)}
+    return {"E_p": float(np.mean(ep[done])), "E_v": float(np.mean(ev[done])), "E_t": float(np.mean(et[done])),
+            "fallen": int(done.size - done.sum())}
 
 
 def _interp_pred(grid, pred_grid: dict, values: np.ndarray) -> dict:
@@ -252,11 +258,14 @@ def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
     if r["delta_bic"] >= 0:
         why.append("information criterion against it")
     e, b = r["errors"], base_errors
-    worse = [k for k in ("E_p", "E_v", "E_t") if e[k] > b[k] * (1 + settings.apex_tolerance) + 1e-6]
+    keys = ("E_p", "E_v", "E_t")
+    worse = [k for k in keys if not e[k] <= b[k] * (1 + settings.apex_tolerance) + 1e-6]
     if worse:
         why.append("held-out " + ", ".join(worse) + " worse")
-    if sum(e.values()) > sum(b.values()) * (1 - settings.apex_improvement):
+    if not sum(e[k] for k in keys) <= sum(b[k] for k in keys) * (1 - settings.apex_improvement):
         why.append("the next apex is not predicted better")
+    if e["fallen"] > b["fallen"]:
+        why.append(f"{e['fallen'] - b['fallen']} more strides fall")
     c = r["candidate"]
     if c.kind == "sensor" and not (c.plausible[0] <= abs(r["magnitude"] - c.off) <= c.plausible[1]):
         why.append(f"{r['magnitude']:.4g} {c.unit} is not a fault a real sensor has and this data resolves")
