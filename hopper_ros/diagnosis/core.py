@@ -36,6 +36,7 @@ class Settings:
     min_strides: int = 6
     max_effects: int = 3
     min_reduction: float = 0.10      # held-out trajectory SSE must fall by at least this share ...
+    min_total_reduction: float = 0.02  # ... and by this share of the model's own SSE (later rounds: not noise)
     min_t: float = 3.0               # ... with a one-sided t of the per-stride log ratio
     apex_tolerance: float = 0.01     # a held-out E_p/E_v/E_t may not grow by more than this share
     apex_improvement: float = 0.03   # ... and their sum must fall by at least this share
@@ -219,6 +220,7 @@ def rank_candidates(data: StrideData, current: Variant, candidates: list[Candida
                         "delta_bic": float(-2 * llr + math.log(n_eff)), "held_sse": held, "errors": errors,
                         "grid": grid})
     for r in results:
+        r["total_reduction"] = float((base_sse.sum() - r["held_sse"].sum()) / data.model_sse)
         _guards(r, base_errors, settings)
     results.sort(key=lambda r: -r["reduction"])
     return results
@@ -253,6 +255,8 @@ def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
     why = []
     if r["reduction"] < settings.min_reduction:
         why.append(f"held-out trajectory residual falls only {100 * r['reduction']:.1f} %")
+    elif r.get("total_reduction", 1.0) < settings.min_total_reduction:
+        why.append(f"it explains only {100 * r['total_reduction']:.1f} % of the model's residual")
     if r["t"] < settings.min_t:
         why.append(f"not consistent over strides (t {r['t']:.1f})")
     if r["delta_bic"] >= 0:
@@ -372,6 +376,7 @@ def _evaluate_exactly(data, current, results, settings, base_sse, base_errors) -
         d = np.log(base_sse / held)
         sd = d.std(ddof=1)
         r["held_sse"] = held
+        r["total_reduction"] = float((base_sse.sum() - held.sum()) / data.model_sse)
         r["t"] = float(d.mean() / (sd / math.sqrt(n))) if sd > 0 else 0.0
         r["reduction"] = float(1.0 - held.sum() / base_sse.sum())
         n_eff = data.sample_count / data.corr_length
@@ -404,6 +409,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     base = base_variant(params, model_effects)
     base_sim = simulate_variants(data, [base], keep_series=True)
     data.corr_length = max(1.0, float(np.median([correlation_length(r["z"][0]) for r in base_sim["series"]])))
+    data.model_sse = float(base_sim["sse"][0].sum())
     fold = _folds(len(data.strides), settings.folds)
     current, current_sse = base, base_sim["sse"][0]
     base_errors = current_errors = _errors(data, {k: v[0] for k, v in base_sim["pred"].items()})

@@ -63,6 +63,7 @@ class StrideData:
     duration: float
     sample_count: int = 0
     corr_length: float = 1.0
+    model_sse: float = 1.0       # the model's own trajectory SSE (before any effect)
 
 
 def prepare(rec: Recording, params: ModelParams, min_strides: int, liftoff_window: float) -> StrideData:
