@@ -27,7 +27,8 @@ LIBRARY_MATCH = {
     "touchdown_loss_along": ("touchdown_loss_along", lambda m: m),
     "touchdown_loss_across": ("touchdown_loss_across", lambda m: m),
     "stiffness_error": ("leg_stiffness", lambda m: NOMINAL["k"] + m),
-    "spring_rest_length_error": ("rest_length", lambda m: NOMINAL["rho_0"] + m),
+    # the plant's spring is longer than its leg stop: a preload k delta_rho (the leg's length is unchanged)
+    "spring_rest_length_error": ("spring_preload", lambda m: NOMINAL["k"] * m),
     "spring_cubic": ("spring_cubic", lambda m: m),
     "leg_damping_quadratic": ("quadratic_leg_damping", lambda m: m),
     "leg_slide_coulomb": ("leg_friction", lambda m: m),
@@ -84,9 +85,13 @@ def score(result: dict, truth: dict, threshold: float) -> dict:
                 if abs(mag - magnitude) <= TOLERANCE * abs(magnitude):
                     found = (k, f"{name} {mag:.4g} (true {magnitude:.4g})")
                     break
-            if name is None and c.kind == "discovered" and c.site in right_sites:
-                found = (k, f"{c.name}: {c.describe(r['value'])}")
-                break
+            if name is None:   # an effect no entry models: terms discovered where it acts (or among the look-alikes)
+                options = [r] + list(r.get("ties", []))
+                hit = next((o for o in options if o["candidate"].kind == "discovered"
+                            and o["candidate"].site in right_sites), None)
+                if hit is not None:
+                    found = (k, f"{hit['candidate'].name}: {hit['candidate'].describe(hit['value'])}")
+                    break
         if found:
             used.add(found[0])
             hits.append((effect["id"], found[1]))

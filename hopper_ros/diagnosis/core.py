@@ -44,7 +44,7 @@ class Settings:
     discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
     tie_t: float = 2.5               # an effect fitting held-out strides not worse by this t is a look-alike ...
     tie_share: float = 0.02          # ... and so is one whose reduction is within this share of the best's
-    locate_threshold: float = 2.0    # residual over noise for a site to stand out
+    locate_threshold: float = 2.5    # residual over noise for a site to stand out
     screen: int = 8                  # candidates the screening passes on to the full search
     screen_strides: int = 24         # strides the screening uses
     liftoff_window: float = 0.003

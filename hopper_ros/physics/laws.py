@@ -140,6 +140,7 @@ class Coefficients:
     ground_height: object = 0.0             # [m] where the toe meets the ground, above the model's z = 0
     # stance, along the leg
     spring_cubic: object = 0.0              # k_3 [N/m^3]: + k_3 (rho_0 - rho)^3
+    spring_preload: object = 0.0            # F_p [N]: + F_p (a spring preloaded against the leg's stop)
     quadratic_damping: object = 0.0         # d_2 [N s^2/m^2]: - d_2 |rho'| rho'
     leg_friction: object = 0.0              # F_c [N]: - F_c tanh(rho'/v_s)
     ground_stiffness: object = 0.0          # k_g [N/m], 0 = rigid ground
@@ -195,7 +196,8 @@ def active(c: Coefficients) -> frozenset:
     cached = c.__dict__.get("_active")
     if cached is None:
         on = set()
-        for name in ("quadratic_drag", "flight_friction_y", "flight_friction_z", "spring_cubic", "quadratic_damping",
+        for name in ("quadratic_drag", "flight_friction_y", "flight_friction_z", "spring_cubic", "spring_preload",
+                     "quadratic_damping",
                      "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness"):
             if np.any(np.asarray(getattr(c, name)) != 0.0):
                 on.add(name)
@@ -260,12 +262,14 @@ class StanceContext:
 
 def leg_force(c: Coefficients, rho, rho_dot):
     """Spring-damper force along the leg, k (rho_0 - rho) - d rho' (2.9), zero at lift-off (2.28), plus the
-    along-the-leg effects other than the discovered terms (cubic spring, quadratic damping, dry friction)."""
+    along-the-leg effects other than the discovered terms (cubic spring, preload, quadratic damping, dry friction)."""
     x = c.rest_length - rho
     force = c.stiffness * x - c.damping * rho_dot
     on = active(c)
     if "spring_cubic" in on:
         force = force + c.spring_cubic * x ** 3
+    if "spring_preload" in on:
+        force = force + c.spring_preload
     if "quadratic_damping" in on:
         force = force - c.quadratic_damping * np.abs(rho_dot) * rho_dot
     if "leg_friction" in on:
