@@ -448,7 +448,8 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     return {"data": data, "rounds": rounds, "chosen": chosen, "before_phase": _rms_table(final_sim, 0, data),
             "after_phase": _rms_table(final_sim, 1, data), "before": before, "after": after,
             "base_series": base_sim["series"], "after_series": final_sim["series"], "location": first_location,
-            "residual_location": residual_location, "discoveries": discoveries, "verdict": verdict(chosen),
+            "residual_location": residual_location, "discoveries": discoveries,
+            "verdict": verdict(chosen, residual_location if chosen else first_location, settings.locate_threshold),
             "settings": settings, "model_effects": dict(model_effects or {})}
 
 
@@ -459,9 +460,18 @@ def _rms_table(sim: dict, row: int, data: StrideData) -> dict:
                  for ci, v in enumerate(("y", "z", "theta"))} for pi, ph in enumerate(PHASES)}
 
 
-def verdict(chosen: list[dict]) -> str:
+def verdict(chosen: list[dict], left: list[Location] | None = None, threshold: float = math.inf) -> str:
+    """The `missing:` line; a located residual that nothing explains is named as such, not hidden."""
+    unexplained = [loc for loc in (left or []) if loc.ratio >= threshold]
+    tail = ""
+    if unexplained:
+        tail = ("; unexplained: " + "; ".join(loc.words() for loc in unexplained[:2])
+                + " (no library effect or discovered term fits it)")
     if not chosen:
-        return "no significant mismatch"
+        if not unexplained:
+            return "no significant mismatch"
+        return ("missing: something no library effect or discovered term models, at "
+                + "; ".join(loc.words() for loc in unexplained[:2]))
     parts = []
     for r in chosen:
         c = r["candidate"]
@@ -472,7 +482,7 @@ def verdict(chosen: list[dict]) -> str:
         if r.get("ties"):
             text += " (or " + " or ".join(t["name"] for t in r["ties"]) + ": not separable on this data)"
         parts.append(text)
-    return "missing: " + ", ".join(parts)
+    return "missing: " + ", ".join(parts) + tail
 
 
 def location_line(locations: list[Location], threshold: float) -> str:
