@@ -31,7 +31,7 @@ def results(tmp_path_factory):
     for k, name in enumerate(SUBSET):
         folder = tmp_path_factory.mktemp(name.replace("+", "_"))
         rec, truth = make_recording(table[name], folder, seed=200 + k)
-        csv = write_csv(folder / "run.csv", rec)
+        csv = write_csv(folder / "input.csv", rec)
         result = diagnose_file(csv, output=folder / "report" if name == "clean_a" else None)
         out[name] = (rec, truth, result, score(result, truth, Settings().locate_threshold), csv)
     return out
