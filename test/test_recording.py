@@ -190,7 +190,8 @@ def test_a_damaged_chunk_ends_the_readable_part_with_a_clear_reason(tmp_path):
     bag.close()
     file = tmp_path / "bag" / "bag_0.mcap"
     data = bytearray(file.read_bytes())
-    data[len(data) // 2] ^= 0xFF                     # one flipped byte in the middle of the data section
+    offsets = chunk_offsets(file)
+    data[offsets[len(offsets) // 2] + 100] ^= 0xFF    # one flipped byte in the compressed data of a middle chunk
     file.write_bytes(bytes(data))
     reader = BagReader(tmp_path / "bag")
     values = [msg.force_vertical for _, _, msg in reader.messages()]
