@@ -13,7 +13,7 @@ import pytest
 from hopper_ros.recording.bag import BagError, BagReader, BagWriter, bag_info, recover_bag
 
 MESSAGE_TYPES = ("ApexState", "BodyMeasurement", "BodyState", "EncoderSample", "GaitEvent", "GroundReactionForce",
-                 "MotorCommand", "MotorStatus", "NodeDiagnostics", "StrideCommand")
+                 "MotorCommand", "MotorStatus", "StrideCommand")
 
 
 def filled(cls, seed: float):
@@ -122,7 +122,7 @@ def test_column_decoder_matches_rclpy_and_declines_what_it_cannot_decode():
             assert np.array_equal(np.asarray(columns[field]), expected), f"{name}.{field}"
     # strings, nested messages, sequences: not flat, left to rclpy
     assert decode_columns(msgs.GaitEvent, [serialize_message(msgs.GaitEvent())]) is None
-    assert decode_columns(msgs.NodeDiagnostics, [serialize_message(msgs.NodeDiagnostics())]) is None
+    assert decode_columns(msgs.StrideCommand, [serialize_message(msgs.StrideCommand())]) is None
     mixed = [msgs.GroundReactionForce(), msgs.GroundReactionForce()]
     mixed[1].header.frame_id = "force_plate"
     assert decode_columns(msgs.GroundReactionForce, [serialize_message(m) for m in mixed]) is None

@@ -106,6 +106,10 @@ else
   # when the set of messages changed.
   msg_list="${msg_files[*]}"
   if [[ -f "$STAMPS/msg-list" && "$(<"$STAMPS/msg-list")" != "$msg_list" ]]; then
+    # what the previous build installed goes first (its manifest goes with the build tree)
+    if [[ -f "$BUILD/install_manifest.txt" ]]; then
+      xargs -d '\n' rm -f < "$BUILD/install_manifest.txt"
+    fi
     rm -rf "$BUILD"
   fi
   mkdir -p "$BUILD"

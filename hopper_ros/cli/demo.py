@@ -115,7 +115,10 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
 
-    from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorStatus, NodeDiagnostics, StrideCommand
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorStatus, StrideCommand
+    from hopper_ros.nodes.diagnostics import DIAGNOSTICS_TOPIC, split_node_name, status_values
 
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("demo_monitor")
@@ -132,8 +135,9 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
         seen["enabled"] = msg.state == MotorStatus.STATE_OPERATION_ENABLED
 
     def on_diagnostics(msg):
-        if msg.node_name.endswith("sim_robot") and "falls" in msg.counter_names:
-            seen["falls"] = msg.counter_values[list(msg.counter_names).index("falls")]
+        for status in msg.status:
+            if split_node_name(status.name) == ("/", "sim_robot"):
+                seen["falls"] = status_values(status).get("falls", seen["falls"])
 
     best_effort = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
     start_up = [node.create_subscription(BodyState, "body_state", lambda m: seen.__setitem__("state", seen["state"] + 1),
@@ -141,7 +145,7 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
                 node.create_subscription(MotorStatus, "motor_status", on_status, best_effort)]
     # this monitor runs with normal scheduling beside a graph on SCHED_FIFO: it may not run for a
     # while, so its queues hold seconds of the (rare) messages it follows
-    node.create_subscription(NodeDiagnostics, "diagnostics", on_diagnostics, MONITOR_DEPTH)
+    node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, on_diagnostics, MONITOR_DEPTH)
     node.create_subscription(ApexState, "apex_setpoint", lambda m: seen.__setitem__("setpoint", m), latched)
     node.create_subscription(StrideCommand, "stride_command", lambda m: seen["commands"].__setitem__(m.stride_index, m),
                              MONITOR_DEPTH)
