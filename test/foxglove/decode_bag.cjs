@@ -5,9 +5,10 @@
 //   node decode_bag.cjs FILE.mcap [TOPIC ...]
 //
 // Prints one JSON object: the MCAP profile, per topic the schema name and encoding, the number
-// of messages decoded, how many left bytes undecoded (schema shorter than the payload), the
-// first error; and every decoded message of the TOPICs named (log time and message, uint64 as
-// decimal strings, typed arrays as arrays). Exit status 0 when every message decoded.
+// of messages decoded, how many ended in alignment padding (up to 3 bytes to a multiple of 4) and
+// how many left other bytes undecoded (a schema shorter than the payload), the first error;
+// and every decoded message of the TOPICs named (log time and message, uint64 as decimal strings,
+// typed arrays as arrays). Exit status 0 when every message decoded.
 // The libraries come from the folder in NODE_PATH (make setup installs them: tools/setup.sh).
 "use strict";
 
@@ -61,7 +62,8 @@ async function main() {
     for (const [id, channel] of reader.channelsById) {
       const schema = reader.schemasById.get(channel.schemaId);
       const entry = { schema: schema ? schema.name : "", schema_encoding: schema ? schema.encoding : "",
-                      message_encoding: channel.messageEncoding, count: 0, trailing_bytes: 0, error: null };
+                      message_encoding: channel.messageEncoding, count: 0, padded: 0, undescribed_bytes: 0,
+                      error: null };
       topics[channel.topic] = entry;
       try {
         if (!schema || schema.encoding !== "ros2msg" || channel.messageEncoding !== "cdr") {
@@ -96,7 +98,14 @@ async function main() {
         continue;
       }
       entry.count += 1;
-      if (decoder.lastReadHadTrailingBytes()) entry.trailing_bytes += 1;
+      // A payload taken from DDS may end in up to 3 bytes of padding to a multiple of 4 (Fast DDS
+      // pads without declaring it in the encapsulation options), which CDR readers skip; more
+      // left undecoded would be data the schema does not describe.
+      const size = message.data.byteLength;
+      const left = size - decoder.lastReadByteLength();
+      const declared = size >= 4 ? message.data[3] & 0x03 : 0;
+      if (left > 0 && !(left <= declared || (left < 4 && size % 4 === 0))) entry.undescribed_bytes += 1;
+      if (left > 0) entry.padded += 1;
       if (dumps[channel.topic]) dumps[channel.topic].push([message.logTime.toString(), plain(decoded)]);
     }
     const statistics = reader.statistics;
