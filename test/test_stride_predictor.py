@@ -93,6 +93,10 @@ def test_node_predicts_and_scores_on_real_topics(rclpy_session, hopper_cli):
         assert level_of(report) == OK and report.message == "OK"
         assert 0.0 <= values["last_Ev_pct"] < 0.5 and 0.0 <= values["last_Ep_pct"] < 0.5
         node_process.wait_for_line(r"stride 4: E_p \d+\.\d+ %, E_v")
+        # and every second without a stride too, the last stride's errors kept
+        received["diagnostics"].clear()
+        assert spin_until(executor, lambda: len(scored()) >= 2, SAFETY_TIMEOUT)
+        assert node_process.process.poll() is None and level_of(scored()[-1]) == OK
     finally:
         executor.shutdown()
         test_node.destroy_node()

@@ -43,7 +43,7 @@ class StridePredictor(Node):
         self._predicted = self.create_publisher(ApexState, "predicted_apex", 10)
         self._diagnostics = DiagnosticsReporter(self)
         self._problem = ""
-        self.create_timer(1.0, self._report)
+        self.create_timer(1.0, self._on_timer)
         self.create_subscription(ApexState, "apex", self._on_apex, 10)
         self.create_subscription(StrideCommand, "stride_command", self._on_command, 10)
         self.get_logger().info(f"predicting strides with the {method} predictor, model {model_file}")
@@ -75,6 +75,10 @@ class StridePredictor(Node):
         msg.stride_index = prediction.stride_index
         msg.apex_height, msg.forward_speed, msg.y = prediction.apex_height, prediction.forward_speed, prediction.y
         self._predicted.publish(msg)
+
+    def _on_timer(self) -> None:
+        # not the timer's callback itself: rclpy hands a callback with a parameter its TimerInfo
+        self._report()
 
     def _report(self, problem: str | None = None) -> None:
         """E_p, E_v, E_t of the last stride and their means; WARN while the last stride was predicted to fail."""
