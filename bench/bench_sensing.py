@@ -54,7 +54,7 @@ WARMUP_S = 1.0
 PERIOD_S = 1e-3
 START_TIMEOUT_S = 60.0
 NODES = ("encoder_bridge", "state_estimator", "event_detector")
-REALTIME_PRIORITY = 50   # SCHED_FIFO of every process of the main run, as in config/launch/demo.yaml
+REALTIME_PRIORITY = 50   # SCHED_FIFO of every process of the main run, as in launch/demo.launch.yaml
 
 
 

@@ -37,11 +37,23 @@ def normalise(dist: str) -> str:
     return re.sub(r"[-_.]+", "-", dist).lower()
 
 
+@lru_cache(maxsize=None)
+def project_modules() -> frozenset[str]:
+    """Names the project's own files and packages import each other by (tests import bench
+    helpers, test packages, ...)."""
+    names = set()
+    for folder in ("test", "bench", "tools"):
+        for path in (REPO / folder).rglob("*.py"):
+            names.add(path.stem)
+            names.update(parent.name for parent in path.relative_to(REPO).parents if parent.name)
+    return frozenset(names)
+
+
 def imported_modules(folder: Path) -> set[str]:
     """Top-level modules imported anywhere under `folder` (also inside functions), but the
-    folder's own modules."""
+    project's own."""
     found = set()
-    local = {path.stem for path in folder.rglob("*.py")}
+    local = project_modules()
     for path in folder.rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
             if isinstance(node, ast.Import):
