@@ -20,7 +20,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "bench"))
 sys.path.insert(0, str(REPO))
 
-from diagnosis_suite import score  # noqa: E402
+from diagnosis_suite import diagnose_and_score, summarise  # noqa: E402
 
 from hopper_ros.config import load_yaml  # noqa: E402
 from hopper_ros.identification.recordings import load_csv  # noqa: E402
@@ -81,32 +81,13 @@ def make_recording(names: list[str], folder: Path, seed: int):
 
 
 def run(names=None, verbose=True) -> dict:
-    from hopper_ros.diagnosis import diagnose_file
-    from hopper_ros.diagnosis.core import Settings, location_line
-
     rows = []
-    threshold = Settings().locate_threshold
     for k, (name, effects) in enumerate(cases().items()):
         if names and name not in names:
             continue
         rec, truth = make_recording(effects, Path(tempfile.mkdtemp()), seed=100 + k)
-        result = diagnose_file(rec)
-        s = score(result, truth, threshold)
-        s.update(name=name, seconds=result["wall_time"], verdict=result["verdict"], before=result["before"],
-                 after=result["after"], location=location_line(result["location"], threshold))
-        rows.append(s)
-        if verbose:
-            print(f"{name}: {len(s['hits'])}/{s['effects']} named, false {s['false_positives']}, located "
-                  f"{len(s['located'])}, {s['seconds']:.0f} s | {s['verdict']} | {s['location']}", flush=True)
-    effects = sum(r["effects"] for r in rows)
-    named = sum(len(r["hits"]) for r in rows)
-    false = sum(len(r["false_positives"]) for r in rows)
-    sensors_on_physics = sum(1 for r in rows for f in r["false_positives"]
-                             if f in library.EFFECTS and library.get(f).kind == "sensor")
-    return {"rows": rows, "hit_rate_pct": 100.0 * named / max(effects, 1),
-            "false_positive_pct": 100.0 * false / max(named + false, 1),
-            "locate_hit_rate_pct": 100.0 * sum(len(r["located"]) for r in rows) / max(effects, 1),
-            "sensor_on_physics": sensors_on_physics, "recordings": len(rows), "effects": effects}
+        rows.append(diagnose_and_score(name, rec, truth, verbose))
+    return summarise(rows)
 
 
 if __name__ == "__main__":

@@ -97,38 +97,52 @@ def score(result: dict, truth: dict, threshold: float) -> dict:
             located.append(effect["id"])
     false = [r["name"] for k, r in enumerate(verdicts) if k not in used]
     return {"hits": hits, "misses": misses, "false_positives": false, "located": located,
-            "effects": len(truth["effects"]), "clean": not truth["effects"]}
+            "effects": len(truth["effects"]), "clean": not truth["effects"],
+            "physics_only": not any(e["site"].startswith("sensor") for e in truth["effects"])}
+
+
+def diagnose_and_score(name: str, recording, truth: dict, verbose: bool = True) -> dict:
+    """One recording diagnosed and scored: the row of a summary."""
+    from hopper_ros.diagnosis import diagnose_file
+    from hopper_ros.diagnosis.core import Settings, location_line
+
+    threshold = Settings().locate_threshold
+    result = diagnose_file(recording)
+    s = score(result, truth, threshold)
+    s.update(name=name, seconds=result["wall_time"], verdict=result["verdict"], before=result["before"],
+             after=result["after"], location=location_line(result["location"], threshold))
+    if verbose:
+        print(f"{name}: {len(s['hits'])}/{s['effects']} named, false {s['false_positives']}, located "
+              f"{len(s['located'])}, {s['seconds']:.0f} s | {s['verdict']} | {s['location']}", flush=True)
+    return s
+
+
+def summarise(rows: list[dict]) -> dict:
+    """Hit, false-positive and locate rates over scored rows; recordings whose held-out apex got worse."""
+    from hopper_ros.physics import effects as library
+
+    effects = sum(r["effects"] for r in rows)
+    named = sum(len(r["hits"]) for r in rows)
+    false = sum(len(r["false_positives"]) for r in rows)
+    worse = [r["name"] for r in rows if any(r["after"][k] > r["before"][k] * 1.01 + 1e-6 for k in ("E_p", "E_v", "E_t"))]
+    return {"rows": rows, "hit_rate_pct": 100.0 * named / max(effects, 1),
+            "false_positive_pct": 100.0 * false / max(named + false, 1),
+            "locate_hit_rate_pct": 100.0 * sum(len(r["located"]) for r in rows) / max(effects, 1),
+            "sensor_on_physics": sum(1 for r in rows if r["physics_only"] for f in r["false_positives"]
+                                     if f in library.EFFECTS and library.get(f).kind == "sensor"),
+            "clean_ok": all(not r["false_positives"] for r in rows if r["clean"]), "worse_after": worse,
+            "recordings": len(rows), "effects": effects}
 
 
 def run(folder: Path, names=None, verbose=True) -> dict:
     """Diagnose every recording of `folder` (CSV + truth JSON) and sum the scores."""
-    from hopper_ros.diagnosis import diagnose_file
-    from hopper_ros.diagnosis.core import Settings, location_line
-
     rows = []
     for truth_path in sorted(folder.glob("*.json")):
         if names and truth_path.stem not in names:
             continue
         truth = json.loads(truth_path.read_text())
-        result = diagnose_file(truth_path.with_suffix(".csv"))
-        s = score(result, truth, Settings().locate_threshold)
-        s.update(name=truth_path.stem, seconds=result["wall_time"], verdict=result["verdict"],
-                 location=location_line(result["location"], Settings().locate_threshold),
-                 before=result["before"], after=result["after"])
-        rows.append(s)
-        if verbose:
-            print(f"{s['name']}: {len(s['hits'])}/{s['effects']} named, false {s['false_positives']}, "
-                  f"{s['seconds']:.0f} s | {s['verdict']} | {s['location']}", flush=True)
-    effects = sum(r["effects"] for r in rows)
-    named = sum(len(r["hits"]) for r in rows)
-    verdicts = sum(len(r["hits"]) + len(r["false_positives"]) for r in rows)
-    false = sum(len(r["false_positives"]) for r in rows)
-    located = sum(len(r["located"]) for r in rows)
-    worse = [r["name"] for r in rows if any(r["after"][k] > r["before"][k] * 1.01 + 1e-6 for k in ("E_p", "E_v", "E_t"))]
-    return {"rows": rows, "hit_rate_pct": 100.0 * named / max(effects, 1),
-            "false_positive_pct": 100.0 * false / max(verdicts, 1), "locate_hit_rate_pct": 100.0 * located / max(effects, 1),
-            "clean_ok": all(not r["false_positives"] for r in rows if r["clean"]), "worse_after": worse,
-            "recordings": len(rows), "effects": effects}
+        rows.append(diagnose_and_score(truth_path.stem, truth_path.with_suffix(".csv"), truth, verbose))
+    return summarise(rows)
 
 
 if __name__ == "__main__":

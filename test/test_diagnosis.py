@@ -107,3 +107,19 @@ def test_bad_inputs(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "hopper_ros.cli", "diagnose", str(bad), "--model", str(model)],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0 and "Traceback" not in proc.stderr
+
+
+def test_the_researchers_loop_with_files_alone(results, tmp_path):
+    """diagnose names the effect -> identify fits it into a model file -> diagnose with that model finds nothing
+    and the held-out next apex is predicted better than with the plain model."""
+    _, _, first, _, csv = results["leg_friction"]
+    name = first["chosen"][0]["name"]
+    proc = subprocess.run([sys.executable, "-m", "hopper_ros.cli", "identify", str(csv), "--effects", name,
+                           "--folds", "3", "-o", str(tmp_path / "id")], capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    model = tmp_path / "id" / "identified_model.yaml"
+    assert name in model.read_text()
+    again = diagnose_file(csv, model=str(model))
+    assert again["model_effects"] and name in again["model_effects"]
+    assert not any(r["name"] == name for r in again["chosen"]), again["verdict"]
+    assert again["before"]["E_p"] < first["before"]["E_p"]

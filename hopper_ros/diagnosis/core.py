@@ -41,7 +41,8 @@ class Settings:
     apex_improvement: float = 0.03   # ... and their sum must fall by at least this share
     sensor_margin: float = 0.15      # a sensor effect must beat the best physics effect's reduction by this share
     discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
-    tie_t: float = 2.5               # another family's effect fitting held-out strides not worse by this t: a look-alike
+    tie_t: float = 2.5               # an effect fitting held-out strides not worse by this t is a look-alike ...
+    tie_share: float = 0.02          # ... and so is one whose reduction is within this share of the best's
     locate_threshold: float = 2.0    # residual over noise for a site to stand out
     screen: int = 8                  # candidates the screening passes on to the full search
     screen_strides: int = 24         # strides the screening uses
@@ -77,7 +78,8 @@ class Candidate:
     physical: Callable            # value -> magnitude in `unit`
     separate: str = ""
     plausible: tuple = (0.0, math.inf)
-    off: float = 0.0
+    off: float = 0.0              # the magnitude (physical) at which a sensor fault is off
+    origin: float = 0.0           # the search value at which the candidate changes nothing
     discovery: Discovery | None = None
     equation: str = ""
 
@@ -96,6 +98,13 @@ LOCATED_SITES = {  # library site -> located sites where it shows first
 
 def library_candidate(effect: library.Effect, base: laws.Coefficients) -> Candidate:
     low, high = effect.search_bounds(base)
+    p = effect.primary
+    if p.coefficient == "toe_mass":
+        origin = float(base.mass) * (1.0 / float(base.collision_factor) - 1.0)
+    elif p.coefficient in laws.Coefficients.scalar_names():
+        origin = effect.search_value(float(getattr(base, p.coefficient)))
+    else:
+        origin = library.SENSOR_OFF.get(p.coefficient, 0.0)
 
     def build(variant: Variant, value: float, effect=effect) -> Variant:
         changes = effect.coefficients(value, variant.coefficients)
@@ -105,7 +114,7 @@ def library_candidate(effect: library.Effect, base: laws.Coefficients) -> Candid
 
     return Candidate(effect.name, effect.kind, effect.family, effect.site, effect.primary.unit, effect.words,
                      low, high, build, effect.physical, effect.separate, effect.primary.plausible,
-                     off=library.SENSOR_OFF.get(effect.primary.coefficient, 0.0), equation=effect.equation)
+                     off=library.SENSOR_OFF.get(p.coefficient, 0.0), origin=origin, equation=effect.equation)
 
 
 def discovered_candidate(found: Discovery) -> Candidate:
@@ -123,16 +132,33 @@ def discovered_candidate(found: Discovery) -> Candidate:
 # ---------------------------------------------------------------------------- ranking
 
 
+def search_grid(c: Candidate, n: int) -> np.ndarray:
+    """n magnitudes between the bounds, denser near the candidate's "off" value (small effects are common)."""
+    origin = float(np.clip(c.origin, c.low, c.high))
+    span = c.high - c.low
+    below = int(round((n - 1) * (origin - c.low) / span)) if span > 0 else 0
+    above = n - 1 - below
+    u_below = np.linspace(1.0, 0.0, below + 1)[:-1] ** 2 if below else np.empty(0)
+    u_above = np.linspace(0.0, 1.0, above + 1)[1:] ** 2 if above else np.empty(0)
+    return np.concatenate([origin - (origin - c.low) * u_below, [origin], origin + (c.high - origin) * u_above])
+
+
 def _folds(n: int, k: int) -> np.ndarray:
     return np.arange(n) % max(2, min(k, n))
 
 
 def _errors(data: StrideData, pred: dict) -> dict:
+    """Mean E_p, E_v, E_t (4.1)-(4.3) of the next apex over the strides the model completes; `fallen` counts
+    the strides it does not (their errors cannot be computed: a model that drops strides is not better)."""
     s = data.strides
     ep = position_error_pct(s.next_apex_height, s.stride_length, pred["height"], pred["length"])
     ev = velocity_error_pct(s.next_forward_speed, pred["speed"])
     et = time_error_pct(s.stride_time, pred["time"])
-    return {"E_p": float(np.nanmean(ep)), "E_v": float(np.nanmean(ev)), "E_t": float(np.nanmean(et))}
+    done = np.isfinite(ep) & np.isfinite(ev) & np.isfinite(et)
+    if not done.any():
+        return {"E_p": math.inf, "E_v": math.inf, "E_t": math.inf, "fallen": int(done.size)}
+    return {"E_p": float(np.mean(ep[done])), "E_v": float(np.mean(ev[done])), "E_t": float(np.mean(et[done])),
+            "fallen": int(done.size - done.sum())}
 
 
 def _interp_pred(grid, pred_grid: dict, values: np.ndarray) -> dict:
@@ -153,7 +179,7 @@ def rank_candidates(data: StrideData, current: Variant, candidates: list[Candida
     on the held-out ones. Returns result dicts, best first."""
     if not candidates:
         return []
-    grids = grids or {c.name: np.linspace(c.low, c.high, settings.grid) for c in candidates}
+    grids = grids or {c.name: search_grid(c, settings.grid) for c in candidates}
     variants = [c.build(current, float(v)) for c in candidates for v in grids[c.name]]
     sim = simulate_variants(data, variants)
     n = sim["sse"].shape[1]
@@ -202,13 +228,13 @@ def _vertex(grid: np.ndarray, values: np.ndarray) -> float:
     """Where a sampled SSE is lowest: the vertex of the parabola through the best grid point and its neighbours
     (an SSE is quadratic in a magnitude near its minimum; its logarithm is not)."""
     k = int(np.argmin(values))
-    if k == 0 or k == len(grid) - 1:
-        return float(grid[k])
-    x, y = grid[k - 1:k + 2], values[k - 1:k + 2]
+    j = min(max(k, 1), len(grid) - 2)
+    x, y = grid[j - 1:j + 2], values[j - 1:j + 2]
     a = np.polyfit(x, y, 2)
     if a[0] <= 0:
         return float(grid[k])
-    return float(np.clip(-a[1] / (2 * a[0]), x[0], x[2]))
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    return float(np.clip(-a[1] / (2 * a[0]), lo, hi))
 
 
 def _quadratic_at(grid: np.ndarray, values: np.ndarray, x: float) -> np.ndarray:
@@ -232,11 +258,14 @@ def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
     if r["delta_bic"] >= 0:
         why.append("information criterion against it")
     e, b = r["errors"], base_errors
-    worse = [k for k in ("E_p", "E_v", "E_t") if e[k] > b[k] * (1 + settings.apex_tolerance) + 1e-6]
+    keys = ("E_p", "E_v", "E_t")
+    worse = [k for k in keys if not e[k] <= b[k] * (1 + settings.apex_tolerance) + 1e-6]
     if worse:
         why.append("held-out " + ", ".join(worse) + " worse")
-    if sum(e.values()) > sum(b.values()) * (1 - settings.apex_improvement):
+    if not sum(e[k] for k in keys) <= sum(b[k] for k in keys) * (1 - settings.apex_improvement):
         why.append("the next apex is not predicted better")
+    if e["fallen"] > b["fallen"]:
+        why.append(f"{e['fallen'] - b['fallen']} more strides fall")
     c = r["candidate"]
     if c.kind == "sensor" and not (c.plausible[0] <= abs(r["magnitude"] - c.off) <= c.plausible[1]):
         why.append(f"{r['magnitude']:.4g} {c.unit} is not a fault a real sensor has and this data resolves")
@@ -258,12 +287,12 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     """The accepted effect of a round and those it cannot be told apart from on this data.
 
     A sensor fault must beat the best physics effect, a discovered term set the best library effect,
-    by a margin. An effect of another family (or one that passed its guards but not a margin) whose held-out
+    by a margin. Any other effect that passed its guards (with or without a margin) whose held-out
     fit is not worse than the accepted one's by a one-sided t of `tie_t` over strides is reported beside it
     as not separable."""
     passed = [r for r in ranking if r["significant"]]
-    best_physics = max((r["reduction"] for r in ranking if r["candidate"].kind == "physics"), default=0.0)
-    best_library = max((r["reduction"] for r in ranking if r["candidate"].kind != "discovered"), default=0.0)
+    best_physics = max((r["reduction"] for r in passed if r["candidate"].kind == "physics"), default=0.0)
+    best_library = max((r["reduction"] for r in passed if r["candidate"].kind != "discovered"), default=0.0)
     for r in passed:
         c = r["candidate"]
         if c.kind == "sensor" and r["reduction"] < best_physics + settings.sensor_margin * r["reduction"]:
@@ -276,8 +305,8 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     if not ok:
         return None, []
     top = max(ok, key=lambda r: r["reduction"])
-    ties = [r for r in passed if r is not top and r["candidate"].family != top["candidate"].family
-            and _paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t]
+    ties = [r for r in passed if r is not top and (_paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t
+                                                    or r["reduction"] >= top["reduction"] * (1 - settings.tie_share))]
     return top, ties
 
 
@@ -307,28 +336,24 @@ def _screen(data: StrideData, current: Variant, candidates: list[Candidate], set
     return [c for c in candidates if c.name in keep]
 
 
-def _refine(data, current, ranking, settings, base_sse, base_errors, exact: int = 12, fine: int = 2) -> list[dict]:
-    """The best of a ranking scored from strides simulated at their fitted magnitudes (no interpolation), then
-    the best two fitted again on a fine grid around their magnitudes."""
-    best = [r for r in ranking[:exact] if r["reduction"] > -0.5]
-    best += [r for r in ranking[exact:] if r["candidate"].kind == "discovered"]
-    if not best:
-        return ranking
-    _evaluate_exactly(data, current, best, settings, base_sse, base_errors)
-    ranking = sorted(ranking, key=lambda r: -r["reduction"])
+def _refine(data, current, ranking, settings, base_sse, base_errors, exact: int = 12) -> list[dict]:
+    """Every candidate again on a fine grid between the neighbours of its best grid value (an SSE is not
+    parabolic where an effect switches on, e.g. a torque limit), then the best scored from strides simulated
+    at their fold magnitudes (no interpolation)."""
     grids = {}
-    for r in ranking[:fine]:
-        step = r["grid"][1] - r["grid"][0]
-        c = r["candidate"]
-        grids[c.name] = np.linspace(max(c.low, r["value"] - step), min(c.high, r["value"] + step), settings.grid)
-    refined = rank_candidates(data, current, [r["candidate"] for r in ranking[:fine]], settings, base_sse,
-                              base_errors, grids=grids)
-    _evaluate_exactly(data, current, refined, settings, base_sse, base_errors)
-    by_name = {r["name"]: r for r in refined}
-    out = [by_name[r["name"]] if r["name"] in by_name and by_name[r["name"]]["reduction"] > r["reduction"] else r
-           for r in ranking]
-    out.sort(key=lambda r: -r["reduction"])
-    return out
+    for r in ranking:
+        grid, c = r["grid"], r["candidate"]
+        k = int(np.argmin(np.abs(grid - r["value"])))
+        grids[c.name] = np.linspace(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)], settings.grid)
+    refined = {r["name"]: r for r in rank_candidates(data, current, [r["candidate"] for r in ranking], settings,
+                                                       base_sse, base_errors, grids=grids)}
+    ranking = [refined[r["name"]] if refined[r["name"]]["fit_reduction"] > r["fit_reduction"] else r
+               for r in ranking]
+    ranking.sort(key=lambda r: -r["fit_reduction"])
+    best = ranking[:exact] + [r for r in ranking[exact:] if r["candidate"].kind == "discovered"]
+    _evaluate_exactly(data, current, best, settings, base_sse, base_errors)
+    ranking.sort(key=lambda r: -r["reduction"])
+    return ranking
 
 
 def _evaluate_exactly(data, current, results, settings, base_sse, base_errors) -> None:

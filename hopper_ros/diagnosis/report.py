@@ -20,6 +20,19 @@ def _num(x):
     return None if x is None or not math.isfinite(float(x)) else float(x)
 
 
+def _finite(value):
+    """JSON has no inf or nan: they become null."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, (np.integer, np.bool_)):
+        return value.item()
+    return value
+
+
 def verdict_entries(result: dict) -> list[dict]:
     """The accepted effects as plain data (what --json writes under "verdict")."""
     out = []
@@ -58,7 +71,7 @@ def write_json(result: dict, path: Path) -> Path:
            "held_out": {"before": result["before"], "after": result["after"]},
            "model_effects": result.get("model_effects", {})}
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(doc, indent=2), encoding="utf-8")
+    path.write_text(json.dumps(_finite(doc), indent=2, allow_nan=False), encoding="utf-8")
     return path
 
 
