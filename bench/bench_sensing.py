@@ -54,7 +54,7 @@ WARMUP_S = 1.0
 PERIOD_S = 1e-3
 START_TIMEOUT_S = 60.0
 NODES = ("encoder_bridge", "state_estimator", "event_detector")
-REALTIME_PRIORITY = 50   # SCHED_FIFO of every process of the main run, as in config/launch/demo.yaml
+REALTIME_PRIORITY = 50   # SCHED_FIFO of every process of the main run, as in launch/demo.launch.yaml
 
 
 
@@ -191,7 +191,10 @@ def _sink(namespace, duration):
     from rclpy.experimental import EventsExecutor
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    from hopper_ros.msg import GaitEvent, NodeDiagnostics
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from hopper_ros.msg import GaitEvent
+    from hopper_ros.nodes.diagnostics import DIAGNOSTICS_TOPIC, status_of, status_values
 
     rclpy.init()
     node = rclpy.create_node("bench_sensing_sink", namespace=namespace, start_parameter_services=False)
@@ -204,13 +207,14 @@ def _sink(namespace, duration):
         events.append((msg.state.sequence, time.monotonic_ns(), published_ns))
         last[0] = time.monotonic()
 
-    def on_diagnostics(msg):
-        if msg.node_name.endswith("event_detector"):
-            counters = dict(zip(msg.counter_names, msg.counter_values))
+    def on_diagnostics(msg):          # every node of every namespace reports on /diagnostics: ours only
+        status = status_of(msg, f"{namespace}/event_detector")
+        if status is not None:
+            counters = status_values(status)
             reports.append((time.monotonic_ns(), counters["samples"], counters["late_samples"]))
 
     node.create_subscription(GaitEvent, "gait_event", on_event, qos)
-    node.create_subscription(NodeDiagnostics, "diagnostics", on_diagnostics, qos)
+    node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, on_diagnostics, qos)
     executor = EventsExecutor()
     executor.add_node(node)
     deadline = time.monotonic() + START_TIMEOUT_S

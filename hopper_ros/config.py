@@ -1,7 +1,8 @@
 """Where the configuration lives and how it is read. No ROS import.
 
-Parameters live in `config/*.yaml` (repository checkout) or, after `colcon build`, in
-`share/hopper_ros/config` of the install prefix. `HOPPER_CONFIG_DIR` overrides both.
+Parameters live in `config/*.yaml` and launch files in `launch/` (repository checkout) or, after
+`colcon build`, in `share/hopper_ros/config` and `share/hopper_ros/launch` of the install prefix.
+`HOPPER_CONFIG_DIR` overrides the config directory.
 """
 
 from __future__ import annotations
@@ -15,19 +16,31 @@ import yaml
 _PACKAGE = "hopper_ros"
 
 
+def package_share_dir() -> Path:
+    """The folder holding config/ and launch/: the repository checkout, or after `colcon build`
+    the install prefix's share/hopper_ros (what `$(find-pkg-share hopper_ros)` gives)."""
+    source_tree = Path(__file__).resolve().parent.parent
+    if (source_tree / "config").is_dir():
+        return source_tree
+    try:  # installed with colcon: share/hopper_ros
+        from ament_index_python.packages import get_package_share_directory
+    except ImportError as exc:  # pragma: no cover - only without a checkout and without ament
+        raise FileNotFoundError("cannot find the hopper_ros share directory; set HOPPER_CONFIG_DIR") from exc
+    return Path(get_package_share_directory(_PACKAGE))
+
+
 def config_dir() -> Path:
     """The directory holding the project's YAML configuration."""
     override = os.environ.get("HOPPER_CONFIG_DIR")
     if override:
         return Path(override)
-    source_tree = Path(__file__).resolve().parent.parent / "config"
-    if source_tree.is_dir():
-        return source_tree
-    try:  # installed with colcon: share/hopper_ros/config
-        from ament_index_python.packages import get_package_share_directory
-    except ImportError as exc:  # pragma: no cover - only without a checkout and without ament
-        raise FileNotFoundError("cannot find the hopper_ros config directory; set HOPPER_CONFIG_DIR") from exc
-    return Path(get_package_share_directory(_PACKAGE)) / "config"
+    return package_share_dir() / "config"
+
+
+def launch_dir() -> Path:
+    """The directory of the launch files (launch/*.launch.yaml; CMake installs them to
+    share/hopper_ros/launch)."""
+    return package_share_dir() / "launch"
 
 
 def config_path(name: str | os.PathLike) -> Path:

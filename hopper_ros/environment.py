@@ -14,13 +14,21 @@ nodes of the 1 kHz loop run on the robot's real-time PC: a sample is handled as 
 instead of waiting behind a busy process. Linux's RT throttling (95 % of each second by default)
 keeps a runaway node from locking the machine. Without the privilege (CAP_SYS_NICE or an
 rtprio limit) the node runs as usual and says so.
+
+Stop signals: a command started with `&` from a script (`bash -c 'make test & wait $!'`, a CI
+runner) starts with SIGINT and SIGQUIT ignored, and its children inherit that; a node that
+inherits an ignored SIGINT does not stop on SIGINT (run_node keeps a disposition its parent chose).
+Whatever starts processes it will stop with signals (the launcher, the test session) therefore
+gives them the default dispositions: `restore_default_stop_signals()`.
 """
 
 from __future__ import annotations
 
 import os
+import signal
 from typing import MutableMapping
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGQUIT)
 DISCOVERY_RANGE_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 REALTIME_PRIORITY_VAR = "HOPPER_REALTIME_PRIORITY"
 DEFAULT_DISCOVERY_RANGE = "LOCALHOST"
@@ -102,3 +110,20 @@ def realtime_scheduling_allowed() -> tuple[bool, str]:
     except (PermissionError, OSError, AttributeError) as exc:
         return False, str(exc) or type(exc).__name__
     return True, ""
+
+
+def restore_default_stop_signals() -> list[str]:
+    """Give SIGINT, SIGTERM and SIGQUIT their usual dispositions where they are ignored; returns
+    the names of those changed.
+
+    In a process that starts children it will stop with signals (a supervisor, the test session):
+    children inherit an ignored signal across exec, but a handled one as its default. SIGINT gets
+    Python's own handler (KeyboardInterrupt), the others SIG_DFL. Also usable as (part of) a
+    subprocess preexec_fn: the child then execs with the defaults. Main thread only.
+    """
+    changed = []
+    for signum in STOP_SIGNALS:
+        if signal.getsignal(signum) == signal.SIG_IGN:
+            signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
+            changed.append(signal.Signals(signum).name)
+    return changed

@@ -1,34 +1,60 @@
 """Launch files and the process supervisor behind `hopper launch`. No ROS import.
 
-Launch file format (YAML; example: config/launch/example.yaml):
+Launch files are ros2 launch's YAML front end (launch_yaml with launch_ros's `node`), so the same
+file runs with `ros2 launch hopper_ros demo.launch.yaml` on a machine with ROS 2 and with
+`hopper launch demo.launch.yaml` here. The files live in `launch/` (installed by CMake to
+`share/hopper_ros/launch/`). What `hopper launch` supports of the format:
 
-    nodes:                          # started in this order, each as its own process
-      - node: setpoint_scheduler    # required: a registered node (hopper_ros/nodes/registry.py)
-        name: setpoints             # optional: ROS node name        (-r __node:=setpoints)
-        namespace: /hopper          # optional: ROS namespace        (-r __ns:=/hopper)
-        parameters:                 # optional: parameter values     (-p name:=value, YAML-encoded;
-          schedule_file: setpoints/fig5_5.yaml   #  nested mappings become dotted names)
-        params_file: params.yaml    # optional: a ROS parameter file (--params-file), or a list of
-                                    #   them; relative to the launch file's folder, else config/
-        remappings:                 # optional: topic/service remaps (-r from:=to)
-          apex: /events/apex
-        args: []                    # optional: more arguments for the node, after the above
-        label: setpoints            # optional: the log prefix (default: [namespace/]name or node)
-        realtime_priority: 60       # optional: SCHED_FIFO priority 1-99 of the node's process
-                                    #   (HOPPER_REALTIME_PRIORITY; hopper_ros/environment.py)
-    sigint_timeout: 5.0             # optional: seconds from SIGINT to SIGTERM when stopping (5)
-    sigterm_timeout: 3.0            # optional: seconds from SIGTERM to SIGKILL (3)
+    launch:
+      - arg:                          # a launch argument: `hopper launch FILE rate:=500`
+          name: rate
+          default: "1000"             # without a default the argument is required
+          description: samples per second
+      - let: {name: ns, value: /hopper}          # a launch configuration
+      - node:                         # one process per node, started in file order
+          pkg: hopper_ros             # required: this package
+          exec: sim_robot             # required: a node of hopper_ros/nodes/registry.py
+          name: sim_robot             # ROS node name   (-r __node:=...)
+          namespace: $(var ns)        # ROS namespace   (-r __ns:=...)
+          param:                      # parameters     (-p name:=value; rcl reads the value as YAML)
+            - {name: mode, value: realtime}
+            - {name: gains, param: [{name: kp, value: 1.5}]}   # nested: gains.kp
+            - {from: params.yaml}     # a ROS parameter file (--params-file): absolute, next to the
+                                      #   launch file, or in config/
+          remap:                      # remappings     (-r from:=to)
+            - {from: apex, to: /events/apex}
+          env:                        # environment of the node's process
+            - {name: HOPPER_REALTIME_PRIORITY, value: "50"}   # SCHED_FIFO priority (hopper_ros.environment)
+          args: "--extra 1"           # arguments after --ros-args ... --
+          ros_args: "--log-level debug"   # more ROS arguments
+          output: screen              # accepted; hopper launch always relays the output
+          on_exit: shutdown           # accepted; hopper launch always stops all when one node ends
+          sigterm_timeout: 5          # s from SIGINT to SIGTERM when stopping (ros2 launch's meaning)
+          sigkill_timeout: 5          # s from SIGTERM to SIGKILL
+          if: $(var with_sim)         # conditions (also on arg and let): true/false/1/0
+          unless: ...
 
-Each entry runs as `python -m hopper_ros.cli run NODE --ros-args ... -- ARGS` in its own session
-(process group). Its stdout/stderr lines are copied to ours, prefixed with `[label] `.
+Substitutions: `$(var NAME)`, `$(env NAME [DEFAULT])`, `$(optenv NAME [DEFAULT])`,
+`$(find-pkg-share PKG)` (hopper_ros: the folder holding config/ and launch/), `$(dirname)`.
+Anything else of the format (groups, includes, other actions, other node attributes) is
+refused with the file, the entry and the key named, rather than silently ignored.
+
+There is no extension key for our extras: ros2 launch rejects any key of a `node` it does not
+know (launch/frontend/expose.py checks that every key was parsed), so the real-time priority is
+the standard `env` entry HOPPER_REALTIME_PRIORITY, which ros2 launch passes to the node as well,
+and the stop timeouts are launch's own `sigterm_timeout` / `sigkill_timeout`.
+
+Each node runs as `python -m hopper_ros.cli run EXEC --ros-args ... -- ARGS` in its own session
+(process group), with the default SIGINT/SIGTERM dispositions whatever ours were. Its
+stdout/stderr lines are copied to ours, prefixed with `[label] ` ([namespace/]name).
 
 Stopping: on SIGINT/SIGTERM (a second one skips ahead), or as soon as one process ends by itself,
-every process group gets SIGINT, then SIGTERM after `sigint_timeout`, then SIGKILL after
-`sigterm_timeout`; signals go to the whole group, so grandchildren stop too. Exit status: 0 when
-the stop was requested and every node exited 0; otherwise non-zero (the status of the node that
-ended by itself: its exit code, 128 + signal, or 1 when it exited 0; 1 when a node needed
-SIGTERM/SIGKILL or failed while stopping). Should the launcher itself be killed, Linux sends
-each node SIGTERM (PR_SET_PDEATHSIG).
+every process group gets SIGINT, then SIGTERM after the largest `sigterm_timeout`, then SIGKILL
+after the largest `sigkill_timeout`; signals go to the whole group, so grandchildren stop too.
+Exit status: 0 when the stop was requested and every node exited 0; otherwise non-zero (the
+status of the node that ended by itself: its exit code, 128 + signal, or 1 when it exited 0; 1
+when a node needed SIGTERM/SIGKILL or failed while stopping). Should the launcher itself be
+killed, Linux sends each node SIGTERM (PR_SET_PDEATHSIG).
 """
 
 from __future__ import annotations
@@ -36,25 +62,31 @@ from __future__ import annotations
 import errno
 import math
 import os
+import re
 import selectors
+import shlex
 import signal
 import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Mapping, TextIO
 
 import yaml
 
-from hopper_ros.config import config_path
-from hopper_ros.environment import REALTIME_PRIORITY_VAR, apply_ros_environment
+from hopper_ros.config import config_path, launch_dir, package_share_dir
+from hopper_ros.environment import REALTIME_PRIORITY_VAR, RosEnvironmentError, apply_ros_environment, realtime_priority
 
-DEFAULT_SIGINT_TIMEOUT = 5.0
-DEFAULT_SIGTERM_TIMEOUT = 3.0
-_ENTRY_KEYS = {"node", "name", "namespace", "parameters", "params_file", "remappings", "args", "label",
-               "realtime_priority"}
-_TOP_KEYS = {"nodes", "sigint_timeout", "sigterm_timeout"}
+PACKAGE = "hopper_ros"
+DEFAULT_SIGINT_TIMEOUT = 5.0       # launch's default sigterm_timeout: SIGINT -> SIGTERM
+DEFAULT_SIGTERM_TIMEOUT = 5.0      # launch's default sigkill_timeout: SIGTERM -> SIGKILL
+_ENTITIES = ("arg", "let", "node")
+_NODE_KEYS = {"pkg", "exec", "name", "namespace", "param", "remap", "env", "args", "ros_args", "output", "on_exit",
+              "sigterm_timeout", "sigkill_timeout", "if", "unless"}
+_ARG_KEYS = {"name", "default", "description", "if", "unless"}
+_LET_KEYS = {"name", "value", "if", "unless"}
+_OUTPUTS = {"screen", "log", "both", "own_log"}
 _READ_SIZE = 65536
 _MAX_LINE = 65536  # a longer line without newline is passed on in pieces
 _KILL_GRACE = 2.0  # [s] after SIGKILL before we give up on a process (unkillable: not ours)
@@ -77,24 +109,21 @@ class LaunchDescription:
     children: list[ChildSpec]
     sigint_timeout: float = DEFAULT_SIGINT_TIMEOUT
     sigterm_timeout: float = DEFAULT_SIGTERM_TIMEOUT
+    arguments: dict[str, str] = field(default_factory=dict)   # the launch arguments in force
 
 
 # --------------------------------------------------------------------------- launch files
 
 
 def _param_value(value: Any) -> str:
+    """A parameter value as `-p name:=VALUE` text. Strings go as they are: rcl reads the text as
+    YAML, as ros2 launch reads a string value (so "0.5" is a double there as here)."""
+    if isinstance(value, str):
+        return value
     text = yaml.safe_dump(value, default_flow_style=True, width=sys.maxsize, allow_unicode=True)
     if text.endswith("\n...\n"):
         text = text[: -len("\n...\n")]
     return text.strip()
-
-
-def _flatten(prefix: str, value: Any, out: list[tuple[str, Any]]) -> None:
-    if isinstance(value, dict):
-        for key, sub in value.items():
-            _flatten(f"{prefix}.{key}" if prefix else str(key), sub, out)
-    else:
-        out.append((prefix, value))
 
 
 def _child_env() -> dict[str, str]:
@@ -117,93 +146,270 @@ def node_command(node: str, ros_args: list[str] = (), extra_args: list[str] = ()
     return argv + list(extra_args)
 
 
-def parse_launch(data: Any, source: str = "<launch>", base_dir: Path | None = None) -> LaunchDescription:
-    """Validate a parsed launch file and build the commands to run."""
+_SUBSTITUTION = re.compile(r"\$\(([^()]*)\)")
+
+
+class _Context:
+    """Launch configurations and the substitutions over them, for one launch file."""
+
+    def __init__(self, source: str, base_dir: Path | None, arguments: Mapping[str, str]):
+        self.source = source
+        self.base_dir = base_dir
+        self.given = dict(arguments)
+        self.configurations: dict[str, str] = {}
+        self.declared: list[str] = []
+
+    def substitute(self, value: Any, where: str) -> Any:
+        if not isinstance(value, str):
+            return value
+        if isinstance(value, str) and "$(" not in value:
+            return value
+
+        def replace(match: re.Match) -> str:
+            parts = match.group(1).split()
+            if not parts:
+                raise LaunchFileError(f"{where}: empty substitution '$()'")
+            kind, args = parts[0], parts[1:]
+            if kind == "var" and len(args) == 1:
+                if args[0] not in self.configurations:
+                    raise LaunchFileError(f"{where}: $(var {args[0]}): no launch argument or 'let' of that name "
+                                          f"before this entry (known: {', '.join(sorted(self.configurations)) or 'none'})")
+                return self.configurations[args[0]]
+            if kind in ("env", "optenv") and 1 <= len(args) <= 2:
+                if args[0] in os.environ:
+                    return os.environ[args[0]]
+                if len(args) == 2 or kind == "optenv":
+                    return args[1] if len(args) == 2 else ""
+                raise LaunchFileError(f"{where}: $(env {args[0]}): environment variable not set (give a default: "
+                                      f"$(env {args[0]} DEFAULT))")
+            if kind == "find-pkg-share" and len(args) == 1:
+                return str(find_package_share(args[0], where))
+            if kind == "dirname" and not args:
+                return str(self.base_dir) if self.base_dir is not None else "."
+            raise LaunchFileError(f"{where}: substitution '$({match.group(1)})' is not supported by hopper launch "
+                                  f"(supported: var, env, optenv, find-pkg-share, dirname)")
+
+        text = _SUBSTITUTION.sub(replace, value)
+        if "$(" in text:
+            raise LaunchFileError(f"{where}: cannot read the substitution in {value!r} (nested or unclosed)")
+        return text
+
+    def condition(self, entity: dict, where: str) -> bool:
+        """False when the entity's `if` is false or its `unless` true."""
+        for key, wanted in (("if", True), ("unless", False)):
+            if key not in entity:
+                continue
+            raw = entity[key]
+            text = str(self.substitute(raw, where)).strip().lower() if not isinstance(raw, bool) else str(raw).lower()
+            if text not in ("true", "false", "1", "0"):
+                raise LaunchFileError(f"{where}: '{key}' must be true, false, 1 or 0, got {raw!r}")
+            if (text in ("true", "1")) != wanted:
+                return False
+        return True
+
+
+def find_package_share(package: str, where: str = "") -> Path:
+    """`$(find-pkg-share PKG)`: hopper_ros's own folder of config/ and launch/, else the ament index's."""
+    if package == PACKAGE:
+        return package_share_dir()
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+    except ImportError:
+        raise LaunchFileError(f"{where}: $(find-pkg-share {package}): no ament index here") from None
+    try:
+        return Path(get_package_share_directory(package))
+    except PackageNotFoundError:
+        raise LaunchFileError(f"{where}: $(find-pkg-share {package}): package not found") from None
+
+
+def _string(context: _Context, entity: dict, key: str, where: str, required: bool = False) -> str | None:
+    if key not in entity:
+        if required:
+            raise LaunchFileError(f"{where}: missing '{key}'")
+        return None
+    value = entity[key]
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+        raise LaunchFileError(f"{where}: '{key}' must be a string, got {value!r}")
+    text = str(context.substitute(str(value), where))
+    if required and not text:
+        raise LaunchFileError(f"{where}: '{key}' is empty")
+    return text
+
+
+def _entity_list(value: Any, key: str, where: str) -> list[dict]:
+    """A `param`/`remap`/`env` attribute: a list of mappings, as launch_yaml wants it."""
+    if not isinstance(value, list) or not value or not all(isinstance(item, dict) for item in value):
+        raise LaunchFileError(f"{where}: '{key}' must be a list of mappings, e.g. [{{name: x, value: 1}}]")
+    return value
+
+
+def _check_keys(entity: dict, known: set[str], kind: str, where: str) -> None:
+    unknown = sorted(set(entity) - known)
+    if unknown:
+        raise LaunchFileError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))} of '{kind}' "
+                              f"(hopper launch supports: {', '.join(sorted(known))})")
+
+
+def _params(context: _Context, items: list[dict], prefix: str, where: str, out: list[str]) -> None:
+    for item in items:
+        if "from" in item:
+            _check_keys(item, {"from", "allow_substs"} if not prefix else {"from"}, "param", where)
+            if prefix:
+                raise LaunchFileError(f"{where}: a parameter file ('from') cannot be nested")
+            path = _resolve_file(context.substitute(item["from"], where), context.base_dir, where)
+            out += ["--params-file", str(path)]
+            continue
+        _check_keys(item, {"name", "value", "param"}, "param", where)
+        name = _string(context, item, "name", where, required=True)
+        full = f"{prefix}.{name}" if prefix else name
+        if ("value" in item) == ("param" in item):
+            raise LaunchFileError(f"{where}: parameter {full!r} needs either 'value' or nested 'param' (not both)")
+        if "param" in item:
+            _params(context, _entity_list(item["param"], "param", f"{where}, parameter {full!r}"), full, where, out)
+            continue
+        value = item["value"]
+        if value is None or isinstance(value, dict):
+            raise LaunchFileError(f"{where}: parameter {full!r} has no usable value ({value!r}); nest mappings "
+                                  f"with 'param'")
+        if isinstance(value, list):
+            value = [context.substitute(v, where) for v in value]
+        else:
+            value = context.substitute(value, where)
+        out += ["-p", f"{full}:={_param_value(value)}"]
+
+
+def _timeout(entity: dict, key: str, where: str) -> float | None:
+    if key not in entity:
+        return None
+    value = entity[key]
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < math.inf:
+        raise LaunchFileError(f"{where}: '{key}' must be a number of seconds >= 0, got {entity[key]!r}")
+    return float(value)
+
+
+def _node(context: _Context, entity: dict, where: str, env: dict[str, str]) -> tuple[ChildSpec, float | None, float | None]:
     from hopper_ros.nodes.registry import NODES
 
-    if not isinstance(data, dict) or not isinstance(data.get("nodes"), list) or not data["nodes"]:
-        raise LaunchFileError(f"{source}: expected a mapping with a non-empty 'nodes' list")
-    unknown = sorted(set(data) - _TOP_KEYS)
-    if unknown:
-        raise LaunchFileError(f"{source}: unknown key(s) {', '.join(map(repr, unknown))} (known: {', '.join(sorted(_TOP_KEYS))})")
-    timeouts = {}
-    for key, default in (("sigint_timeout", DEFAULT_SIGINT_TIMEOUT), ("sigterm_timeout", DEFAULT_SIGTERM_TIMEOUT)):
-        value = data.get(key, default)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < math.inf:
-            raise LaunchFileError(f"{source}: {key!r} must be a number of seconds >= 0, got {value!r}")
-        timeouts[key] = float(value)
+    if "realtime_priority" in entity:   # the key of our former launch format
+        raise LaunchFileError(f"{where}: 'realtime_priority' is not a key of ros2 launch's node: give the SCHED_FIFO "
+                              f"priority as env [{{name: {REALTIME_PRIORITY_VAR}, value: \"N\"}}]")
+    _check_keys(entity, _NODE_KEYS, "node", where)
+    package = _string(context, entity, "pkg", where, required=True)
+    if package != PACKAGE:
+        raise LaunchFileError(f"{where}: pkg {package!r}: hopper launch starts the nodes of {PACKAGE} only")
+    executable = _string(context, entity, "exec", where, required=True)
+    if executable not in NODES:
+        raise LaunchFileError(f"{where}: unknown exec {executable!r}; {PACKAGE}'s nodes: {', '.join(sorted(NODES))}")
+    where = f"{where} ({executable})"
+    ros_args: list[str] = []
+    name, namespace = _string(context, entity, "name", where), _string(context, entity, "namespace", where)
+    if name:
+        ros_args += ["-r", f"__node:={name}"]
+    if namespace:
+        namespace = namespace if namespace.startswith("/") else "/" + namespace
+        if namespace != "/":
+            ros_args += ["-r", f"__ns:={namespace}"]
+    if "param" in entity:
+        _params(context, _entity_list(entity["param"], "param", where), "", where, ros_args)
+    for item in _entity_list(entity["remap"], "remap", where) if "remap" in entity else []:
+        _check_keys(item, {"from", "to"}, "remap", where)
+        ros_args += ["-r", f"{_string(context, item, 'from', where, True)}:={_string(context, item, 'to', where, True)}"]
+    if "ros_args" in entity:
+        ros_args += shlex.split(_string(context, entity, "ros_args", where) or "")
+    extra = shlex.split(_string(context, entity, "args", where) or "") if "args" in entity else []
+    output = _string(context, entity, "output", where)
+    if output is not None and output not in _OUTPUTS:
+        raise LaunchFileError(f"{where}: 'output' must be one of {', '.join(sorted(_OUTPUTS))}, got {output!r}")
+    on_exit = _string(context, entity, "on_exit", where)
+    if on_exit is not None and on_exit != "shutdown":
+        raise LaunchFileError(f"{where}: 'on_exit' can only be 'shutdown' (as in ros2 launch), got {on_exit!r}")
+    child_env = env
+    if "env" in entity:
+        child_env = dict(env)
+        for item in _entity_list(entity["env"], "env", where):
+            _check_keys(item, {"name", "value"}, "env", where)
+            child_env[_string(context, item, "name", where, True)] = _string(context, item, "value", where) or ""
+        try:
+            realtime_priority(child_env)
+        except RosEnvironmentError as exc:
+            raise LaunchFileError(f"{where}: {exc}") from None
+    label = (namespace.strip("/") + "/" if namespace and namespace != "/" else "") + (name or executable)
+    spec = ChildSpec(label, node_command(executable, ros_args, extra), child_env)
+    return spec, _timeout(entity, "sigterm_timeout", where), _timeout(entity, "sigkill_timeout", where)
 
+
+def parse_launch(data: Any, source: str = "<launch>", base_dir: Path | None = None,
+                 arguments: Mapping[str, str] | None = None) -> LaunchDescription:
+    """Validate a parsed launch file, with the launch arguments given, and build the commands."""
+    if not isinstance(data, dict) or list(data) != ["launch"]:
+        found = ", ".join(map(repr, data)) if isinstance(data, dict) else type(data).__name__
+        raise LaunchFileError(f"{source}: expected one root key 'launch' (ros2 launch's YAML format), found {found}")
+    entities = data["launch"]
+    if not isinstance(entities, list) or not entities:
+        raise LaunchFileError(f"{source}: 'launch' must be a non-empty list of entities (arg, let, node)")
+    context = _Context(source, base_dir, arguments or {})
     env = _child_env()
     children: list[ChildSpec] = []
     labels: dict[str, int] = {}
-    for index, entry in enumerate(data["nodes"], start=1):
+    sigterm, sigkill = [], []
+    for index, item in enumerate(entities, start=1):
         where = f"{source}: entry {index}"
-        if not isinstance(entry, dict):
-            raise LaunchFileError(f"{where}: expected a mapping, got {entry!r}")
-        if "node" in entry:
-            where += f" ({entry['node']})"
-        unknown = sorted(set(entry) - _ENTRY_KEYS)
-        if unknown:
-            raise LaunchFileError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))} (known: {', '.join(sorted(_ENTRY_KEYS))})")
-        node = entry.get("node")
-        if node not in NODES:
-            problem = "missing 'node'" if node is None else f"unknown node {node!r}"
-            raise LaunchFileError(f"{where}: {problem}; registered nodes: {', '.join(sorted(NODES))}")
-        for key in ("name", "namespace", "label"):
-            if key in entry and (not isinstance(entry[key], str) or not entry[key]):
-                raise LaunchFileError(f"{where}: {key!r} must be a non-empty string, got {entry[key]!r}")
-
-        ros_args: list[str] = []
-        name, namespace = entry.get("name"), entry.get("namespace")
-        if name:
-            ros_args += ["-r", f"__node:={name}"]
-        if namespace:
-            namespace = namespace if namespace.startswith("/") else "/" + namespace
-            ros_args += ["-r", f"__ns:={namespace}"]
-
-        parameters = entry.get("parameters", {})
-        if not isinstance(parameters, dict):
-            raise LaunchFileError(f"{where}: 'parameters' must be a mapping of name: value")
-        flat: list[tuple[str, Any]] = []
-        _flatten("", parameters, flat)
-        for pname, value in flat:
-            if value is None:
-                raise LaunchFileError(f"{where}: parameter {pname!r} has no value")
-            ros_args += ["-p", f"{pname}:={_param_value(value)}"]
-
-        params_files = entry.get("params_file", [])
-        for pfile in [params_files] if isinstance(params_files, str) else params_files:
-            ros_args += ["--params-file", str(_resolve_file(pfile, base_dir, where))]
-
-        remappings = entry.get("remappings", {})
-        if not isinstance(remappings, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in remappings.items()):
-            raise LaunchFileError(f"{where}: 'remappings' must be a mapping of from: to (strings)")
-        for source_name, target in remappings.items():
-            ros_args += ["-r", f"{source_name}:={target}"]
-
-        extra = entry.get("args", [])
-        if not isinstance(extra, list):
-            raise LaunchFileError(f"{where}: 'args' must be a list")
-
-        label = entry.get("label") or ((namespace.strip("/") + "/" if namespace and namespace != "/" else "") + (name or node))
-        if label in labels:
-            raise LaunchFileError(
-                f"{where}: label {label!r} is already used by entry {labels[label]}; give the entries distinct names or labels"
-            )
-        labels[label] = index
-        child_env = env
-        if "realtime_priority" in entry:
-            priority = entry["realtime_priority"]
-            if isinstance(priority, bool) or not isinstance(priority, int) or not 1 <= priority <= 99:
-                raise LaunchFileError(f"{where}: 'realtime_priority' must be a SCHED_FIFO priority 1-99, got {priority!r}")
-            child_env = {**env, REALTIME_PRIORITY_VAR: str(priority)}
-        children.append(ChildSpec(label, node_command(node, ros_args, [str(a) for a in extra]), child_env))
-    return LaunchDescription(children, timeouts["sigint_timeout"], timeouts["sigterm_timeout"])
+        if not isinstance(item, dict) or len(item) != 1:
+            raise LaunchFileError(f"{where}: an entity is a mapping with one key, its type ({', '.join(_ENTITIES)})")
+        (kind, entity), = item.items()
+        if kind not in _ENTITIES:
+            raise LaunchFileError(f"{where}: entity '{kind}' is not supported by hopper launch "
+                                  f"(supported: {', '.join(_ENTITIES)})")
+        if not isinstance(entity, dict):
+            raise LaunchFileError(f"{where}: '{kind}' must be a mapping of its attributes")
+        where = f"{where} ({kind})"
+        if kind == "arg":
+            _check_keys(entity, _ARG_KEYS, kind, where)
+            name = _string(context, entity, "name", where, required=True)
+            if not context.condition(entity, where):
+                continue
+            context.declared.append(name)
+            if name in context.given:
+                context.configurations[name] = context.given[name]
+            elif "default" in entity:
+                context.configurations[name] = _string(context, entity, "default", where) or ""
+            else:
+                raise LaunchFileError(f"{where}: launch argument {name!r} is required: give it as {name}:=VALUE")
+        elif kind == "let":
+            _check_keys(entity, _LET_KEYS, kind, where)
+            name = _string(context, entity, "name", where, required=True)
+            if context.condition(entity, where):
+                context.configurations[name] = _string(context, entity, "value", where, required=False) or ""
+        else:
+            if not context.condition(entity, where):
+                continue
+            spec, term, kill = _node(context, entity, where, env)
+            if spec.label in labels:
+                raise LaunchFileError(f"{where}: a node {spec.label!r} is already started by entry {labels[spec.label]}; "
+                                      f"give the nodes distinct names or namespaces")
+            labels[spec.label] = index
+            children.append(spec)
+            sigterm += [term] if term is not None else []
+            sigkill += [kill] if kill is not None else []
+    unknown = sorted(set(context.given) - set(context.declared))
+    if unknown:
+        raise LaunchFileError(f"{source}: no launch argument {', '.join(map(repr, unknown))} in this file "
+                              f"(its arguments: {', '.join(context.declared) or 'none'})")
+    if not children:
+        raise LaunchFileError(f"{source}: no node to start")
+    return LaunchDescription(children, max(sigterm, default=DEFAULT_SIGINT_TIMEOUT),
+                             max(sigkill, default=DEFAULT_SIGTERM_TIMEOUT),
+                             {name: context.configurations[name] for name in context.declared})
 
 
 def _resolve_file(value: Any, base_dir: Path | None, where: str) -> Path:
     if not isinstance(value, str) or not value:
-        raise LaunchFileError(f"{where}: 'params_file' must be a path or a list of paths, got {value!r}")
+        raise LaunchFileError(f"{where}: a parameter file ('from') must be a path, got {value!r}")
     path = Path(value)
     if path.is_absolute() and path.exists():
         return path
@@ -212,17 +418,33 @@ def _resolve_file(value: Any, base_dir: Path | None, where: str) -> Path:
     try:
         return config_path(path).resolve()
     except FileNotFoundError as exc:
-        raise LaunchFileError(f"{where}: params_file {value!r} not found") from exc
+        raise LaunchFileError(f"{where}: parameter file {value!r} not found") from exc
 
 
-def load_launch(name: str | os.PathLike) -> LaunchDescription:
-    """Read a launch file: a path, or relative to the config directory (e.g. launch/example.yaml)."""
-    path = config_path(name)
+def launch_file_path(name: str | os.PathLike, package: str | None = None) -> Path:
+    """A launch file: an existing path, else a file of the package's launch/ folder
+    (`demo.launch.yaml`), as `ros2 launch hopper_ros demo.launch.yaml` finds it."""
+    if package not in (None, PACKAGE):
+        raise FileNotFoundError(f"package {package!r}: hopper launch runs {PACKAGE}'s launch files only")
+    path = Path(name)
+    if package is None and path.is_file():
+        return path
+    candidate = launch_dir() / path
+    if candidate.is_file():
+        return candidate
+    available = ", ".join(sorted(p.name for p in launch_dir().glob("*.launch.yaml")))
+    raise FileNotFoundError(f"launch file {str(name)!r} not found (a path, or one of {PACKAGE}'s: {available})")
+
+
+def load_launch(name: str | os.PathLike, arguments: Mapping[str, str] | None = None,
+                package: str | None = None) -> LaunchDescription:
+    """Read a launch file (a path, or a name in launch/) with the launch arguments given."""
+    path = launch_file_path(name, package)
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
         raise LaunchFileError(f"{path}: not valid YAML: {exc}") from exc
-    return parse_launch(data, source=str(name), base_dir=path.resolve().parent)
+    return parse_launch(data, source=str(name), base_dir=path.resolve().parent, arguments=arguments)
 
 
 # --------------------------------------------------------------------------- supervisor
@@ -256,22 +478,27 @@ def _group_alive(pgid: int) -> bool:
     return False
 
 
-def _die_with_parent(parent_pid: int):
-    """A preexec_fn asking Linux to send SIGTERM to the child if the launcher itself dies
+def _child_preexec(parent_pid: int):
+    """The preexec_fn of every child: the default SIGINT/SIGTERM/SIGQUIT dispositions (a launcher
+    started with `&` from a script inherited SIGINT ignored, and so would its nodes: they would
+    never stop on our SIGINT), and on Linux a SIGTERM to the child should the launcher itself die
     (SIGKILL included), so not even a killed launcher leaves its nodes running."""
-    if not sys.platform.startswith("linux"):
-        return None
-    import ctypes
+    prctl = None
+    if sys.platform.startswith("linux"):
+        import ctypes
 
-    try:
-        prctl = ctypes.CDLL(None, use_errno=True).prctl
-    except (OSError, AttributeError):
-        return None
+        try:
+            prctl = ctypes.CDLL(None, use_errno=True).prctl
+        except (OSError, AttributeError):
+            prctl = None
 
     def preexec() -> None:
-        prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-        if os.getppid() != parent_pid:  # the launcher died before that: stop right away
-            os.kill(os.getpid(), signal.SIGTERM)
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGQUIT):
+            signal.signal(signum, signal.SIG_DFL)
+        if prctl is not None:
+            prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+            if os.getppid() != parent_pid:  # the launcher died before that: stop right away
+                os.kill(os.getpid(), signal.SIGTERM)
 
     return preexec
 
@@ -395,7 +622,7 @@ class Launcher:
             env=spec.env,
             cwd=spec.cwd,
             start_new_session=True,  # own session and process group: no terminal signals, group kill
-            preexec_fn=_die_with_parent(os.getpid()),
+            preexec_fn=_child_preexec(os.getpid()),
         )
         child = _Child(spec, process)
         self._children.append(child)

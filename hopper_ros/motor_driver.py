@@ -101,7 +101,7 @@ COUNTER_NAMES = (
     "watchdog_stops", "heartbeat_losses", "drive_bootups", "startup_failures",
 )
 
-INFO, WARN, ERROR = 0, 1, 2   # event / health levels (NodeDiagnostics.OK, WARN, ERROR)
+INFO, WARN, ERROR = 0, 1, 2   # event / health levels (DiagnosticStatus OK, WARN, ERROR)
 
 
 class Phase(str, Enum):

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+from hopper_ros.environment import restore_default_stop_signals
+
 REPO = Path(__file__).resolve().parent.parent
 SAFETY_TIMEOUT = 60.0  # [s] bound on any wait in the tests: a hang fails instead of blocking CI
 
@@ -53,9 +55,15 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ["ROS_DOMAIN_ID"] = str(_free_domain_id())
 os.environ.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
 
+# Started with `&` from a script (`bash -c 'make test & wait $!'`, a CI runner), this session
+# has SIGINT and SIGQUIT ignored, and every process a test starts would inherit that: a node
+# then never stops on the SIGINT a test sends. The usual dispositions for us, so for them too.
+RESTORED_SIGNALS = restore_default_stop_signals()
+
 
 def pytest_report_header(config):
-    return f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST"
+    restored = f" (restored default {', '.join(RESTORED_SIGNALS)}: started with them ignored)" if RESTORED_SIGNALS else ""
+    return f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST{restored}"
 
 
 def free_port(kind: int = socket.SOCK_STREAM) -> int:

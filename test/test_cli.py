@@ -69,3 +69,28 @@ def test_topic_echo_gives_up_or_stops_on_request(hopper_cli):
     waiting.wait_for_line(r"^waiting for a publisher on /nobody/publishes/that")
     waiting.signal(signal.SIGINT)
     assert waiting.wait() == 0, waiting.stderr
+
+
+def test_topic_list_and_echo_show_the_standard_diagnostics(hopper_cli):
+    """A running node reports on /diagnostics as diagnostic_msgs/DiagnosticArray, which `hopper
+    topic list -t` and `hopper topic echo` show as ros2 topic would."""
+    import signal
+
+    node = hopper_cli("run", "setpoint_scheduler", "--ros-args", "-r", "__ns:=/robot")
+    try:
+        node.wait_for_line(r"started: pid")
+        listing = hopper_cli("topic", "list", "-t")
+        echo = hopper_cli("topic", "echo", "/diagnostics", "--once", "--timeout", "60")
+        assert listing.wait() == 0, listing.stderr
+        assert "/diagnostics [diagnostic_msgs/msg/DiagnosticArray]" in listing.stdout.splitlines()
+        assert "/robot/diagnostics" not in listing.stdout          # absolute, whatever the namespace
+        assert echo.wait() == 0, echo.stderr
+        report = yaml.safe_load(echo.stdout.split("---")[0])
+        [status] = report["status"]
+        assert (status["name"], status["level"], status["message"]) == ("/robot/setpoint_scheduler", "\0", "OK")
+        assert {pair["key"]: pair["value"] for pair in status["values"]} == {
+            "setpoints_published": "1", "apexes": "0", "segment": "1", "apex_height_m": "0.39",
+            "forward_speed_m_s": "2.0"}
+    finally:
+        node.signal(signal.SIGINT)
+        assert node.wait() == 0

@@ -113,3 +113,50 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         assert node_process.wait() == 0
         executor.shutdown()
         node.destroy_node()
+
+
+def test_controller_stops_on_its_own_motor_drivers_error_only(rclpy_session, hopper_cli):
+    """/diagnostics carries every node of every namespace: an ERROR of another namespace's motor
+    driver changes nothing, one of the controller's own namespace puts it in its safe state,
+    which its own status then says."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hopper_ros.nodes.diagnostics import ERROR, OK, WARN, diagnostic_array, diagnostic_status, level_of, status_of
+
+    node_process = hopper_cli("run", "deadbeat_controller", "--ros-args", "-r", "__ns:=/robot")
+    node_process.wait_for_line(r"closed_loop: predictor corrected")
+    node = rclpy_session.create_node("controller_diagnostics_test")
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    reports = []
+    node.create_subscription(DiagnosticArray, "/diagnostics", reports.append, 100)
+    publisher = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+
+    def own_status():
+        statuses = [status_of(array, "/robot/deadbeat_controller") for array in reports]
+        return [s for s in statuses if s is not None]
+
+    def drive_fault(name: str) -> None:
+        publisher.publish(diagnostic_array(time.time(), [diagnostic_status(name, {"faults": 1}, {}, "EMCY 0x8611",
+                                                                         ERROR, "EPOS2 node 1")]))
+
+    try:
+        assert spin_until(executor, lambda: publisher.get_subscription_count() >= 2 and own_status())
+        assert level_of(own_status()[-1]) == OK
+        drive_fault("/other/motor_driver")
+        reports.clear()
+        assert spin_until(executor, lambda: len(own_status()) >= 2)          # two reports later, still fine
+        assert all(level_of(s) == OK for s in own_status())
+        drive_fault("/robot/motor_driver")
+        node_process.wait_for_line(r"motor driver: EMCY 0x8611")
+        reports.clear()
+        assert spin_until(executor, lambda: own_status())
+        status = own_status()[-1]
+        assert level_of(status) == WARN and "motor driver: EMCY 0x8611" in status.message
+        assert {v.key: v.value for v in status.values}["faults"] == "1"
+    finally:
+        node_process.signal(signal.SIGINT)
+        assert node_process.wait() == 0
+        executor.shutdown()
+        node.destroy_node()

@@ -161,3 +161,20 @@ def test_a_node_asked_for_realtime_priority_runs_every_thread_on_sched_fifo(hopp
     rt.signal(signal.SIGINT)
     normal.signal(signal.SIGINT)
     assert rt.wait() == 0 and normal.wait() == 0
+
+
+def test_a_test_session_started_in_the_background_still_stops_what_it_starts():
+    """`bash -c 'make test & wait $!'` (a script, a CI runner) starts pytest with SIGINT and SIGQUIT
+    ignored; every process a test starts would inherit that and never stop on SIGINT. The session
+    restores the defaults (conftest.py): a test that stops a `hopper topic echo` with SIGINT passes."""
+    import subprocess
+    import sys
+
+    from conftest import REPO
+
+    test = f"{REPO}/test/test_cli.py::test_topic_echo_gives_up_or_stops_on_request"
+    result = subprocess.run(["bash", "-c", f"'{sys.executable}' -m pytest -p no:cacheprovider '{test}' & wait $!"],
+                            cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "restored default SIGINT, SIGQUIT: started with them ignored" in result.stdout
+    assert "1 passed" in result.stdout

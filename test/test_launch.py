@@ -7,8 +7,10 @@ import signal
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
+import yaml
 
 from hopper_ros.launcher import LaunchFileError, load_launch, parse_launch
 from hopper_ros.nodes.registry import NODES
@@ -16,9 +18,14 @@ from hopper_ros.nodes.registry import NODES
 STARTED_CHILD = r"^\[launch\] started {}: pid (\d+)$"
 
 
+def node(exec_name: str, **attributes) -> dict:
+    return {"node": {"pkg": "hopper_ros", "exec": exec_name, **attributes}}
+
+
 def test_example_launch_file_is_valid():
-    description = load_launch("launch/example.yaml")
+    description = load_launch("example.launch.yaml")
     child, predictor = description.children
+    assert description.arguments == {"namespace": "/hopper"}
     assert child.label == "hopper/setpoint_scheduler"
     assert child.argv[1:] == [
         "-m", "hopper_ros.cli", "run", "setpoint_scheduler", "--ros-args",
@@ -28,60 +35,108 @@ def test_example_launch_file_is_valid():
     assert child.env["ROS_AUTOMATIC_DISCOVERY_RANGE"] in ("LOCALHOST", "OFF", "SUBNET", "SYSTEM_DEFAULT")
     assert predictor.label == "hopper/stride_predictor"
     assert predictor.argv[4:] == [
-        "stride_predictor", "--ros-args", "-r", "__ns:=/hopper",
+        "stride_predictor", "--ros-args", "-r", "__node:=stride_predictor", "-r", "__ns:=/hopper",
         "-p", "predictor:=corrected", "-p", "model_file:=model.yaml", "--",
     ]  # fmt: skip
+    # a launch argument, as `ros2 launch hopper_ros example.launch.yaml namespace:=/robot2`
+    moved = load_launch("example.launch.yaml", {"namespace": "/robot2"})
+    assert [c.label for c in moved.children] == ["robot2/setpoint_scheduler", "robot2/stride_predictor"]
 
 
-def test_entry_fields_become_ros_arguments(tmp_path):
+@pytest.mark.parametrize("name", sorted(p.name for p in (Path(__file__).resolve().parents[1] / "launch").glob("*")))
+def test_every_installed_launch_file_is_ros2_launch_yaml(name):
+    """launch/ holds only ros2 launch YAML files, each with one root 'launch' and nodes of this
+    package; hopper launch reads them (the keys it accepts are a subset of launch_ros's)."""
+    from hopper_ros.config import launch_dir
+
+    assert name.endswith(".launch.yaml")
+    data = yaml.safe_load((launch_dir() / name).read_text())
+    assert list(data) == ["launch"]
+    description = load_launch(name)
+    assert description.children and all(c.argv[3] == "run" for c in description.children)
+    for entity in data["launch"]:
+        if "node" in entity:
+            assert entity["node"]["pkg"] == "hopper_ros" and entity["node"]["exec"] in NODES
+
+
+def test_node_attributes_become_ros_arguments(tmp_path):
     (tmp_path / "params.yaml").write_text("x: {ros__parameters: {a: 1}}\n")
     description = parse_launch(
-        {
-            "nodes": [
-                {
-                    "node": "setpoint_scheduler",
-                    "parameters": {"gains": {"kp": 1.5}, "name": "0.5", "flags": [True, False], "n": 3},
-                    "params_file": "params.yaml",
-                    "args": ["--extra", 1],
-                    "label": "sched",
-                }
-            ],
-            "sigint_timeout": 1,
-            "sigterm_timeout": 0.5,
-        },
+        {"launch": [node(
+            "setpoint_scheduler", name="sched", namespace="ns",
+            param=[{"name": "gains", "param": [{"name": "kp", "value": 1.5}]}, {"name": "text", "value": "0.5"},
+                   {"name": "flags", "value": [True, False]}, {"name": "n", "value": 3}, {"from": "params.yaml"}],
+            remap=[{"from": "apex", "to": "/events/apex"}],
+            args="--extra 1", ros_args="--log-level debug", output="screen", on_exit="shutdown",
+            sigterm_timeout=1, sigkill_timeout="0.5")]},
         "t.yaml",
         base_dir=tmp_path,
     )
     [child] = description.children
     ros_args = child.argv[child.argv.index("--ros-args") + 1 :]
     assert ros_args == [
-        "-p", "gains.kp:=1.5", "-p", "name:='0.5'", "-p", "flags:=[true, false]", "-p", "n:=3",
-        "--params-file", str(tmp_path / "params.yaml"), "--", "--extra", "1",
+        "-r", "__node:=sched", "-r", "__ns:=/ns",
+        "-p", "gains.kp:=1.5", "-p", "text:=0.5", "-p", "flags:=[true, false]", "-p", "n:=3",
+        "--params-file", str(tmp_path / "params.yaml"), "-r", "apex:=/events/apex", "--log-level", "debug",
+        "--", "--extra", "1",
     ]  # fmt: skip
-    assert (child.label, description.sigint_timeout, description.sigterm_timeout) == ("sched", 1.0, 0.5)
+    assert (child.label, description.sigint_timeout, description.sigterm_timeout) == ("ns/sched", 1.0, 0.5)
 
 
-def test_realtime_priority_goes_to_that_node_only():
+def test_realtime_priority_is_the_node_environment_of_that_node_only():
     from hopper_ros.environment import REALTIME_PRIORITY_VAR
 
-    rt, normal = parse_launch({"nodes": [{"node": "encoder_bridge", "realtime_priority": 60},
-                                         {"node": "setpoint_scheduler"}]}, "t.yaml").children
+    rt, normal = parse_launch({"launch": [node("encoder_bridge", env=[{"name": REALTIME_PRIORITY_VAR, "value": "60"}]),
+                                          node("setpoint_scheduler")]}, "t.yaml").children
     assert rt.env[REALTIME_PRIORITY_VAR] == "60" and REALTIME_PRIORITY_VAR not in normal.env
+
+
+def test_arguments_lets_substitutions_and_conditions(monkeypatch):
+    monkeypatch.setenv("HOPPER_TEST_SCHEDULE", "setpoints/fig5_5.yaml")
+    data = {"launch": [
+        {"arg": {"name": "ns", "default": "/a"}},
+        {"arg": {"name": "with_predictor", "default": "false"}},
+        {"let": {"name": "sub", "value": "$(var ns)/b"}},
+        node("setpoint_scheduler", namespace="$(var sub)",
+             param=[{"name": "schedule_file", "value": "$(env HOPPER_TEST_SCHEDULE)"},
+                    {"name": "where", "value": "$(find-pkg-share hopper_ros)/config"},
+                    {"name": "missing", "value": "$(env HOPPER_NOT_SET fallback)"}]),
+        node("stride_predictor", **{"if": "$(var with_predictor)"}),
+        node("event_detector", **{"unless": "$(var with_predictor)"}),
+    ]}
+    description = parse_launch(data, "t.yaml")
+    assert [c.label for c in description.children] == ["a/b/setpoint_scheduler", "event_detector"]
+    scheduler = description.children[0].argv
+    from hopper_ros.config import config_dir
+
+    assert "schedule_file:=setpoints/fig5_5.yaml" in scheduler and "missing:=fallback" in scheduler
+    assert f"where:={config_dir()}" in scheduler
+    given = parse_launch(data, "t.yaml", arguments={"ns": "/c", "with_predictor": "true"})
+    assert [c.label for c in given.children] == ["c/b/setpoint_scheduler", "stride_predictor"]
+    assert given.arguments == {"ns": "/c", "with_predictor": "true"}
 
 
 @pytest.mark.parametrize(
     "data, message",
     [
-        ({"nodes": [{"node": "nope"}]}, f"entry 1 (nope): unknown node 'nope'; registered nodes: {', '.join(sorted(NODES))}"),
-        ({"nodes": [{"name": "x"}]}, "entry 1: missing 'node'"),
-        ({"nodes": [{"node": "setpoint_scheduler", "remap": {}}]}, "entry 1 (setpoint_scheduler): unknown key(s) 'remap'"),
-        ({"nodes": [{"node": "setpoint_scheduler"}, {"node": "setpoint_scheduler"}]}, "entry 2 (setpoint_scheduler): label 'setpoint_scheduler' is already used by entry 1"),
-        ({"nodes": [{"node": "setpoint_scheduler", "params_file": "missing.yaml"}]}, "params_file 'missing.yaml' not found"),
-        ({"nodes": [{"node": "setpoint_scheduler", "parameters": {"a": None}}]}, "parameter 'a' has no value"),
-        ({"nodes": [{"node": "setpoint_scheduler", "remappings": ["a:=b"]}]}, "'remappings' must be a mapping"),
-        ({"nodes": []}, "non-empty 'nodes' list"),
-        ({"nodes": [{"node": "setpoint_scheduler"}], "sigint_timeout": -1}, "'sigint_timeout' must be a number"),
-        ({"nodes": [{"node": "setpoint_scheduler", "realtime_priority": 100}]}, "'realtime_priority' must be a SCHED_FIFO priority 1-99"),
+        ({"nodes": [{"node": "setpoint_scheduler"}]}, "expected one root key 'launch' (ros2 launch's YAML format), found 'nodes'"),
+        ({"launch": [node("nope")]}, f"entry 1 (node): unknown exec 'nope'; hopper_ros's nodes: {', '.join(sorted(NODES))}"),
+        ({"launch": [{"node": {"exec": "sim_robot"}}]}, "entry 1 (node): missing 'pkg'"),
+        ({"launch": [{"node": {"pkg": "demo_nodes_py", "exec": "talker"}}]}, "pkg 'demo_nodes_py': hopper launch starts the nodes of hopper_ros only"),
+        ({"launch": [node("setpoint_scheduler", realtime_priority=50)]}, "entry 1 (node): 'realtime_priority' is not a key of ros2 launch's node: give the SCHED_FIFO priority as env [{name: HOPPER_REALTIME_PRIORITY, value: \"N\"}]"),
+        ({"launch": [node("setpoint_scheduler", respawn=True)]}, "entry 1 (node): unknown key(s) 'respawn' of 'node' (hopper launch supports: args, env,"),
+        ({"launch": [{"group": {}}]}, "entry 1: entity 'group' is not supported by hopper launch (supported: arg, let, node)"),
+        ({"launch": [node("setpoint_scheduler"), node("setpoint_scheduler")]}, "entry 2 (node): a node 'setpoint_scheduler' is already started by entry 1"),
+        ({"launch": [node("setpoint_scheduler", param=[{"from": "missing.yaml"}])]}, "parameter file 'missing.yaml' not found"),
+        ({"launch": [node("setpoint_scheduler", param=[{"name": "a"}])]}, "parameter 'a' needs either 'value' or nested 'param'"),
+        ({"launch": [node("setpoint_scheduler", remap={"a": "b"})]}, "'remap' must be a list of mappings"),
+        ({"launch": [node("setpoint_scheduler", sigterm_timeout=-1)]}, "'sigterm_timeout' must be a number of seconds >= 0"),
+        ({"launch": [node("setpoint_scheduler", env=[{"name": "HOPPER_REALTIME_PRIORITY", "value": "100"}])]}, "must be a SCHED_FIFO priority 1-99"),
+        ({"launch": [node("setpoint_scheduler", namespace="$(var nope)")]}, "$(var nope): no launch argument or 'let' of that name"),
+        ({"launch": [node("setpoint_scheduler", namespace="$(command ls)")]}, "substitution '$(command ls)' is not supported"),
+        ({"launch": [{"arg": {"name": "x"}}, node("setpoint_scheduler")]}, "launch argument 'x' is required: give it as x:=VALUE"),
+        ({"launch": [node("setpoint_scheduler", **{"if": "maybe"})]}, "'if' must be true, false, 1 or 0"),
+        ({"launch": [node("setpoint_scheduler", on_exit="restart")]}, "'on_exit' can only be 'shutdown'"),
     ],
 )  # fmt: skip
 def test_bad_launch_files_name_the_entry(data, message):
@@ -89,6 +144,36 @@ def test_bad_launch_files_name_the_entry(data, message):
         parse_launch(data, "t.yaml")
     assert str(info.value).startswith("t.yaml")
     assert message in str(info.value)
+
+
+def test_an_undeclared_launch_argument_is_refused():
+    with pytest.raises(LaunchFileError, match=r"no launch argument 'nmaespace' in this file \(its arguments: namespace\)"):
+        load_launch("example.launch.yaml", {"nmaespace": "/x"})
+
+
+def test_bad_command_lines_get_one_line(hopper_cli, tmp_path):
+    (tmp_path / "bad.launch.yaml").write_text("launch:\n  - node: {pkg: hopper_ros, exec: nope}\n")
+    for words, message in [
+        (["no_such.launch.yaml"], "launch file 'no_such.launch.yaml' not found (a path, or one of hopper_ros's: "
+                                  "demo.launch.yaml, demo_500hz.launch.yaml, example.launch.yaml)"),
+        ([str(tmp_path / "bad.launch.yaml")], "entry 1 (node): unknown exec 'nope'"),
+        (["other_pkg", "demo.launch.yaml"], "package 'other_pkg': hopper launch runs hopper_ros's launch files only"),
+        (["hopper_ros", "example.launch.yaml", "namespace"], "expected [PACKAGE] FILE, got hopper_ros example.launch.yaml namespace"),
+    ]:
+        process = hopper_cli("launch", *words)
+        assert process.wait() == 2
+        assert process.stderr.startswith("hopper launch: error: ") and message in process.stderr, process.stderr
+        assert len(process.stderr.splitlines()) == 1 and "Traceback" not in process.stderr
+
+
+def test_show_args_and_print(hopper_cli):
+    shown = hopper_cli("launch", "hopper_ros", "demo.launch.yaml", "realtime_priority:=0", "--show-args")
+    assert shown.wait() == 0 and shown.stdout == "realtime_priority:=0\n"
+    printed = hopper_cli("launch", "demo_500hz.launch.yaml", "--print")
+    assert printed.wait() == 0
+    assert [line.split(":")[0] for line in printed.stdout.splitlines()] == [
+        "sim_robot", "motor_driver", "encoder_bridge", "state_estimator", "event_detector", "setpoint_scheduler",
+        "deadbeat_controller"]  # fmt: skip
 
 
 # --------------------------------------------------------------------------- supervisor, no ROS
@@ -150,19 +235,23 @@ def test_supervisor_escalates_and_leaves_no_grandchild():
 
 def _two_schedulers(tmp_path):
     (tmp_path / "schedule.yaml").write_text("segments:\n  - {apex_height: 0.4, forward_speed: 2.0}\n")
-    launch_file = tmp_path / "two.yaml"
+    launch_file = tmp_path / "two.launch.yaml"
     launch_file.write_text(
         textwrap.dedent(
             f"""
-            nodes:
-              - node: setpoint_scheduler
-                name: scheduler_a
-                parameters: {{schedule_file: {tmp_path / 'schedule.yaml'}}}
-              - node: setpoint_scheduler
-                name: scheduler_b
-                namespace: other
-                parameters: {{schedule_file: {tmp_path / 'schedule.yaml'}}}
-            sigint_timeout: 10
+            launch:
+              - node:
+                  pkg: hopper_ros
+                  exec: setpoint_scheduler
+                  name: scheduler_a
+                  param: [{{name: schedule_file, value: {tmp_path / 'schedule.yaml'}}}]
+                  sigterm_timeout: 10
+              - node:
+                  pkg: hopper_ros
+                  exec: setpoint_scheduler
+                  name: scheduler_b
+                  namespace: other
+                  param: [{{name: schedule_file, value: {tmp_path / 'schedule.yaml'}}}]
             """
         )
     )
@@ -247,3 +336,54 @@ def test_nodes_of_a_killed_launcher_stop_too():
         if child is not None and process_alive(child):
             os.kill(child, signal.SIGKILL)
         process.stdout.close()
+
+
+def _ignored_signals(pid: int) -> set[int]:
+    """The signals process `pid` ignores (SigIgn of /proc/PID/status)."""
+    from pathlib import Path
+
+    line = next(l for l in Path(f"/proc/{pid}/status").read_text().splitlines() if l.startswith("SigIgn:"))
+    mask = int(line.split()[1], 16)
+    return {signum for signum in range(1, 65) if mask & (1 << (signum - 1))}
+
+
+def test_a_launcher_started_with_sigint_ignored_still_stops_its_nodes_with_sigint(tmp_path):
+    """`hopper launch FILE &` in a script starts the launcher with SIGINT (and SIGQUIT) ignored;
+    its nodes get the default dispositions all the same, and stop on the launcher's SIGINT."""
+    from conftest import REPO, SAFETY_TIMEOUT, process_alive
+
+    def as_a_background_job():       # what bash does for `cmd &` without job control
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGQUIT, signal.SIG_IGN)
+
+    process = subprocess.Popen(
+        [sys.executable, "-m", "hopper_ros.cli", "launch", str(_two_schedulers(tmp_path))],
+        cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"},
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        preexec_fn=as_a_background_job,
+    )
+    try:
+        assert {signal.SIGINT, signal.SIGQUIT} <= _ignored_signals(process.pid)
+        pids = {}
+        while len(pids) < 2:
+            line = process.stdout.readline()
+            assert line, f"launcher ended early: {process.stderr.read()}"
+            if line.startswith("[launch] started"):
+                pids[line.split()[2].rstrip(":")] = int(line.split()[-1])
+        for label, pid in pids.items():
+            assert not {signal.SIGINT, signal.SIGTERM, signal.SIGQUIT} & _ignored_signals(pid), label
+        started = 0
+        while started < 2:            # both nodes up (their start line comes once rclpy runs)
+            line = process.stderr.readline()
+            assert line, "launcher ended early"
+            started += "started: pid" in line
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=SAFETY_TIMEOUT)
+        assert process.returncode == 0, out + err
+        assert "sending SIGTERM" not in out                       # SIGINT was enough
+        assert err.count("stopping on SIGINT") == 2, err
+        assert not any(process_alive(pid) for pid in pids.values())
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()

@@ -77,14 +77,16 @@ def _start_node(hopper_cli, hub):
 def _test_node(rclpy_session, name):
     from rclpy.executors import SingleThreadedExecutor
 
-    from hopper_ros.msg import MotorCommand, MotorStatus, NodeDiagnostics
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from hopper_ros.msg import MotorCommand, MotorStatus
 
     node = rclpy_session.create_node(name)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     got = {"status": [], "diagnostics": []}
     node.create_subscription(MotorStatus, "motor_status", got["status"].append, 100)
-    node.create_subscription(NodeDiagnostics, "diagnostics", got["diagnostics"].append, 10)
+    node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: got["diagnostics"].extend(m.status), 10)
     publisher = node.create_publisher(MotorCommand, "motor_command", 10)
     assert spin_until(executor, lambda: publisher.get_subscription_count() and got["status"])
 
@@ -102,7 +104,8 @@ def _test_node(rclpy_session, name):
 
 
 def test_node_drives_the_epos2_reports_and_stops_safely_on_sigterm(rclpy_session, hopper_cli, drive):
-    from hopper_ros.msg import MotorCommand, MotorStatus, NodeDiagnostics
+    from hopper_ros.msg import MotorCommand, MotorStatus
+    from hopper_ros.nodes.diagnostics import WARN, level_of, status_values
 
     process = _start_node(hopper_cli, drive.hub)
     node, executor, got, command = _test_node(rclpy_session, "motor_driver_test")
@@ -128,8 +131,8 @@ def test_node_drives_the_epos2_reports_and_stops_safely_on_sigterm(rclpy_session
         assert spin_until(executor, lambda: any(d.message == "command timeout: drive stopped"
                                                 for d in got["diagnostics"]))
         report = next(d for d in got["diagnostics"] if d.message == "command timeout: drive stopped")
-        assert report.level == NodeDiagnostics.WARN
-        assert dict(zip(report.counter_names, report.counter_values))["watchdog_stops"] >= 1   # more if we stalled
+        assert level_of(report) == WARN and report.name == "/motor_driver" and report.hardware_id.startswith("EPOS2 node")
+        assert status_values(report)["watchdog_stops"] >= 1   # more if we stalled
         process.wait_for_line(r"no motor command for \d+\.\d ms: quick stop")
 
         # a drive fault: EMCY decoded into the EPOS2's words

@@ -6,6 +6,7 @@ from __future__ import annotations
 import array
 import math
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ import pytest
 from hopper_ros.recording.bag import BagError, BagReader, BagWriter, bag_info, recover_bag
 
 MESSAGE_TYPES = ("ApexState", "BodyMeasurement", "BodyState", "EncoderSample", "GaitEvent", "GroundReactionForce",
-                 "MotorCommand", "MotorStatus", "NodeDiagnostics", "StrideCommand")
+                 "MotorCommand", "MotorStatus", "StrideCommand")
 
 
 def filled(cls, seed: float):
@@ -122,7 +123,7 @@ def test_column_decoder_matches_rclpy_and_declines_what_it_cannot_decode():
             assert np.array_equal(np.asarray(columns[field]), expected), f"{name}.{field}"
     # strings, nested messages, sequences: not flat, left to rclpy
     assert decode_columns(msgs.GaitEvent, [serialize_message(msgs.GaitEvent())]) is None
-    assert decode_columns(msgs.NodeDiagnostics, [serialize_message(msgs.NodeDiagnostics())]) is None
+    assert decode_columns(msgs.StrideCommand, [serialize_message(msgs.StrideCommand())]) is None
     mixed = [msgs.GroundReactionForce(), msgs.GroundReactionForce()]
     mixed[1].header.frame_id = "force_plate"
     assert decode_columns(msgs.GroundReactionForce, [serialize_message(m) for m in mixed]) is None
@@ -190,7 +191,8 @@ def test_a_damaged_chunk_ends_the_readable_part_with_a_clear_reason(tmp_path):
     bag.close()
     file = tmp_path / "bag" / "bag_0.mcap"
     data = bytearray(file.read_bytes())
-    data[len(data) // 2] ^= 0xFF                     # one flipped byte in the middle of the data section
+    offsets = chunk_offsets(file)
+    data[offsets[len(offsets) // 2] + 100] ^= 0xFF    # one flipped byte in the compressed data of a middle chunk
     file.write_bytes(bytes(data))
     reader = BagReader(tmp_path / "bag")
     values = [msg.force_vertical for _, _, msg in reader.messages()]
@@ -278,3 +280,66 @@ def test_a_copied_bag_without_metadata_still_reads(tmp_path):
     result = recover_bag(tmp_path / "bag")
     assert not result.already_complete and result.kept_original is None and result.messages == 50
     assert bag_info(tmp_path / "bag").complete
+
+
+def test_schema_text_is_what_rosbag2_writes():
+    """rosbag2's LocalMessageDefinitionSource: the .msg files verbatim, each dependency once, depth
+    first in sorted order, under "MSG: pkg/Type" as the field names it (not pkg/msg/Type)."""
+    from ament_index_python.packages import get_package_share_directory
+
+    from hopper_ros.recording.schemas import SEPARATOR, message_definition
+
+    def text(package, name):
+        return (Path(get_package_share_directory(package)) / "msg" / f"{name}.msg").read_text()
+
+    def section(type_name):
+        package, name = type_name.split("/")
+        return f"\n{SEPARATOR}\nMSG: {type_name}\n{text(package, name)}"
+
+    expected = (text("diagnostic_msgs", "DiagnosticArray") + section("diagnostic_msgs/DiagnosticStatus")
+                + section("diagnostic_msgs/KeyValue") + section("std_msgs/Header") + section("builtin_interfaces/Time"))
+    assert message_definition("diagnostic_msgs/msg/DiagnosticArray") == expected
+    # our own: GaitEvent uses BodyState (same package, named without one) and Header, both use Header
+    expected = (text("hopper_ros", "GaitEvent") + section("hopper_ros/BodyState") + section("std_msgs/Header")
+                + section("builtin_interfaces/Time"))
+    assert message_definition("hopper_ros/msg/GaitEvent") == expected
+    assert "MSG: std_msgs/msg/" not in expected
+
+
+def test_metadata_is_what_rosbag2_kilted_writes(tmp_path):
+    """metadata.yaml as rosbag2 (Kilted: metadata version 9) writes it with yaml-cpp: its keys in
+    its order, sequences indented, `~` for no custom data, `""` for empty strings, the QoS
+    profiles as a list, the type hash; the MCAP channel carries the same QoS and hash."""
+    import yaml
+    from mcap.reader import make_reader
+
+    from hopper_ros.msg import ApexState
+    from hopper_ros.recording.schemas import type_hash
+
+    with BagWriter(tmp_path / "bag") as bag:
+        bag.write_message("/apex", ApexState(apex_height=0.4), 1_700_000_000_000_000_000)
+        bag.write_message("/apex", ApexState(apex_height=0.5), 1_700_000_000_500_000_000)
+    text = (tmp_path / "bag" / "metadata.yaml").read_text()
+    digest = type_hash("hopper_ros/msg/ApexState")
+    assert digest.startswith("RIHS01_") and len(digest) == 7 + 64
+    assert text.startswith("rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n  duration:\n"
+                           "    nanoseconds: 500000000\n  starting_time:\n    nanoseconds_since_epoch: 1700000000000000000\n"
+                           "  message_count: 2\n  topics_with_message_count:\n    - topic_metadata:\n"
+                           "        name: /apex\n        type: hopper_ros/msg/ApexState\n        serialization_format: cdr\n"
+                           "        offered_qos_profiles:\n          - history: keep_last\n")
+    assert (f"        type_description_hash: {digest}\n      message_count: 2\n  compression_format: \"\"\n"
+            f"  compression_mode: \"\"\n  relative_file_paths:\n    - bag_0.mcap\n  files:\n    - path: bag_0.mcap\n") in text
+    assert text.endswith("      message_count: 2\n  custom_data: ~\n  ros_distro: kilted")   # yaml-cpp: no final newline
+    document = yaml.safe_load(text)["rosbag2_bagfile_information"]
+    assert list(document) == ["version", "storage_identifier", "duration", "starting_time", "message_count",
+                              "topics_with_message_count", "compression_format", "compression_mode",
+                              "relative_file_paths", "files", "custom_data", "ros_distro"]
+    with open(tmp_path / "bag" / "bag_0.mcap", "rb") as handle:
+        reader = make_reader(handle)
+        summary = reader.get_summary()
+        [channel] = summary.channels.values()
+        assert channel.metadata["topic_type_hash"] == digest
+        assert yaml.safe_load(channel.metadata["offered_qos_profiles"]) == document["topics_with_message_count"][0][
+            "topic_metadata"]["offered_qos_profiles"]
+        [record] = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
+        assert yaml.safe_load(record.metadata["serialized_metadata"]) == document

@@ -38,8 +38,10 @@ def test_sigint_closes_a_bag_recorded_from_the_simulated_robot(hopper_cli, tmp_p
     recorder = hopper_cli("bag", "record", "force_plate", "sim/truth", "diagnostics", "-o", str(tmp_path / "bag"))
     try:
         robot.wait_for_line(r"realtime at 1000 Hz")
-        for topic in ("/force_plate", "/sim/truth", "/diagnostics"):
-            recorder.wait_for_line(rf"recording {topic} \[hopper_ros/msg/")
+        for topic, type_name in (("/force_plate", "hopper_ros/msg/GroundReactionForce"),
+                                 ("/sim/truth", "hopper_ros/msg/BodyState"),
+                                 ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")):
+            recorder.wait_for_line(rf"recording {topic} \[{type_name}\]")
         time.sleep(1.5)
         recorder.signal(signal.SIGINT)
         assert recorder.wait() == 0
@@ -61,7 +63,7 @@ def test_sigint_closes_a_bag_recorded_from_the_simulated_robot(hopper_cli, tmp_p
     stamps = np.array([msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 for _, msg in by_topic["/sim/truth"]])
     assert abs(np.median(np.diff(stamps)) - 1e-3) < 1e-6     # the robot's 1 kHz clock, every sample kept
     assert np.sum(np.diff(stamps) > 1.5e-3) < 0.01 * len(stamps)
-    assert by_topic["/diagnostics"][-1][1].node_name == "/sim_robot"
+    assert [status.name for status in by_topic["/diagnostics"][-1][1].status] == ["/sim_robot"]
     info = bag_info(tmp_path / "bag")
     assert info.complete and info.message_count == len(messages)
 

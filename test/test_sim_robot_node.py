@@ -46,7 +46,10 @@ def stance_seen(forces) -> bool:
 def test_node_streams_packets_force_plate_and_true_events(rclpy_session, hopper_cli):
     from rclpy.executors import SingleThreadedExecutor
 
-    from hopper_ros.msg import ApexState, BodyState, GaitEvent, GroundReactionForce, NodeDiagnostics
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from hopper_ros.msg import ApexState, BodyState, GaitEvent, GroundReactionForce
+    from hopper_ros.nodes.diagnostics import OK, WARN, level_of, status_values
 
     udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     udp.bind(("127.0.0.1", 0))
@@ -59,7 +62,7 @@ def test_node_streams_packets_force_plate_and_true_events(rclpy_session, hopper_
     test_node.create_subscription(GroundReactionForce, "force_plate", got["force"].append, 1000)
     test_node.create_subscription(BodyState, "sim/truth", got["truth"].append, 1000)
     test_node.create_subscription(GaitEvent, "sim/events", got["events"].append, 100)
-    test_node.create_subscription(NodeDiagnostics, "diagnostics", got["diagnostics"].append, 10)
+    test_node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: got["diagnostics"].extend(m.status), 10)
     try:
         packets = [packet_format.decode(data) for data in receive_packets(udp, 1500)]
         assert len(packets) == 1500                 # pacing (real-time factor 1): bench sim_realtime_mode_factor
@@ -78,8 +81,12 @@ def test_node_streams_packets_force_plate_and_true_events(rclpy_session, hopper_
         stance_force = max(f.force_vertical for f in got["force"])
         assert stance_force > 50.0                  # the robot landed on the plate
         report = got["diagnostics"][-1]
-        assert report.node_name == "/sim_robot" and "periods" in report.counter_names
-        assert "realtime_factor" in report.value_names
+        assert report.name == "/sim_robot" and report.hardware_id == "simulated robot"
+        values = status_values(report)
+        assert isinstance(values["periods"], int) and values["periods"] > 0
+        # with the motor off the robot falls after its stride: a warning, said in words
+        assert (level_of(report), report.message) == ((WARN, "the robot fell") if values["falls"] else (OK, "OK"))
+        assert 0.5 < values["realtime_factor"] < 1.5
     finally:
         node.signal(signal.SIGINT)
         assert node.wait() == 0

@@ -44,7 +44,10 @@ def test_node_predicts_and_scores_on_real_topics(rclpy_session, hopper_cli):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.time import Time
 
-    from hopper_ros.msg import ApexState, NodeDiagnostics, StrideCommand
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from hopper_ros.msg import ApexState, StrideCommand
+    from hopper_ros.nodes.diagnostics import OK, level_of, status_of, status_values
 
     ramp, opening, closing = _true_strides()
     node_process = hopper_cli("run", "stride_predictor")
@@ -54,7 +57,7 @@ def test_node_predicts_and_scores_on_real_topics(rclpy_session, hopper_cli):
     executor.add_node(test_node)
     received = {"predicted": [], "diagnostics": []}
     test_node.create_subscription(ApexState, "predicted_apex", received["predicted"].append, 10)
-    test_node.create_subscription(NodeDiagnostics, "diagnostics", received["diagnostics"].append, 10)
+    test_node.create_subscription(DiagnosticArray, "/diagnostics", received["diagnostics"].append, 10)
     apex_pub = test_node.create_publisher(ApexState, "apex", 10)
     command_pub = test_node.create_publisher(StrideCommand, "stride_command", 10)
     try:
@@ -80,13 +83,20 @@ def test_node_predicts_and_scores_on_real_topics(rclpy_session, hopper_cli):
         assert predicted.header.stamp.sec + predicted.header.stamp.nanosec * 1e-9 == pytest.approx(10.0 + expected.stride_time, abs=1e-8)
 
         apex_pub.publish(apex_msg(closing))
-        assert spin_until(executor, lambda: received["diagnostics"], SAFETY_TIMEOUT)
-        report = received["diagnostics"][-1]
-        values = dict(zip(report.value_names, report.values))
-        counters = dict(zip(report.counter_names, report.counter_values))
-        assert counters["strides_scored"] == 1 and report.level == NodeDiagnostics.OK
+        def scored():
+            reports = [status_of(array, "/stride_predictor") for array in received["diagnostics"]]
+            return [r for r in reports if r is not None and status_values(r)["strides_scored"] == 1]
+
+        assert spin_until(executor, scored, SAFETY_TIMEOUT)
+        report = scored()[-1]
+        values = status_values(report)
+        assert level_of(report) == OK and report.message == "OK"
         assert 0.0 <= values["last_Ev_pct"] < 0.5 and 0.0 <= values["last_Ep_pct"] < 0.5
         node_process.wait_for_line(r"stride 4: E_p \d+\.\d+ %, E_v")
+        # and every second without a stride too, the last stride's errors kept
+        received["diagnostics"].clear()
+        assert spin_until(executor, lambda: len(scored()) >= 2, SAFETY_TIMEOUT)
+        assert node_process.process.poll() is None and level_of(scored()[-1]) == OK
     finally:
         executor.shutdown()
         test_node.destroy_node()

@@ -7,6 +7,9 @@
 #           the venv prefix (inputs: deps, msg/*.msg, CMakeLists.txt, package.xml)
 #   pkg   - pip install -e . (console scripts; inputs: deps, setup.py, package.xml,
 #           hopper_ros/nodes/registry.py)
+#   foxglove - npm ci of Foxglove's MCAP / ROS 2 libraries into .venv/foxglove, for
+#           test/test_foxglove.py (inputs: test/foxglove/package*.json); skipped, and said so,
+#           where Node.js or npm is absent
 # The no-op path runs no Python at all (every venv Python is re-executed once by
 # ros-wheels-bootstrapper), only sha256sum over the inputs.
 #
@@ -59,7 +62,7 @@ msg_files=(msg/*.msg)
 shopt -u nullglob
 
 # ---------------------------------------------------------------- deps
-deps_key="v$SETUP_VERSION $ROOT $(hash_files requirements/ros.txt requirements/python.txt)"
+deps_key="v$SETUP_VERSION $ROOT $(hash_files requirements/ros.txt requirements/python.txt requirements/test.txt)"
 if [[ -x "$VENV/bin/python" ]] && stage_current deps "$deps_key"; then
   say "deps up to date"
 else
@@ -72,9 +75,9 @@ else
     say "creating $VENV with $PYTHON"
     "$PYTHON" -m venv "$VENV"
   fi
-  say "installing pinned ROS 2 wheels and Python dependencies (requirements/*.txt)"
+  say "installing pinned ROS 2 wheels, Python dependencies and test tools (requirements/*.txt)"
   "$VENV/bin/python" -m pip install --progress-bar off \
-    -r requirements/ros.txt -r requirements/python.txt
+    -r requirements/ros.txt -r requirements/python.txt -r requirements/test.txt
   stage_done deps "$deps_key"
 fi
 # colcon must not mistake the ROS wheels' share/*/package.xml in .venv for packages.
@@ -103,6 +106,10 @@ else
   # when the set of messages changed.
   msg_list="${msg_files[*]}"
   if [[ -f "$STAMPS/msg-list" && "$(<"$STAMPS/msg-list")" != "$msg_list" ]]; then
+    # what the previous build installed goes first (its manifest goes with the build tree)
+    if [[ -f "$BUILD/install_manifest.txt" ]]; then
+      xargs -d '\n' rm -f < "$BUILD/install_manifest.txt"
+    fi
     rm -rf "$BUILD"
   fi
   mkdir -p "$BUILD"
@@ -149,5 +156,27 @@ else
   say "pip install -e . (console scripts: hopper + one per node of hopper_ros/nodes/registry.py)"
   "$VENV/bin/python" -m pip install --progress-bar off --no-deps --no-build-isolation -e "$ROOT"
   stage_done pkg "$pkg_key"
+fi
+
+# ---------------------------------------------------------------- foxglove
+# Foxglove's own libraries (@mcap/core, @foxglove/rosmsg, @foxglove/rosmsg2-serialization),
+# pinned with their closure in test/foxglove/package-lock.json, installed with this machine's
+# npm into an ignored folder; test/test_foxglove.py opens our bags with them.
+FOXGLOVE="$VENV/foxglove"
+foxglove_key="v$SETUP_VERSION $(hash_files test/foxglove/package.json test/foxglove/package-lock.json)"
+if ! command -v node > /dev/null 2>&1 || ! command -v npm > /dev/null 2>&1; then
+  say "foxglove skipped: no Node.js/npm on this machine (test/test_foxglove.py is skipped)"
+elif stage_current foxglove "$foxglove_key" && [[ -d "$FOXGLOVE/node_modules" ]]; then
+  say "foxglove up to date"
+else
+  say "installing Foxglove's MCAP and ROS 2 libraries with npm (test/foxglove/package-lock.json)"
+  rm -rf "$FOXGLOVE"
+  mkdir -p "$FOXGLOVE"
+  cp test/foxglove/package.json test/foxglove/package-lock.json "$FOXGLOVE/"
+  if ! (cd "$FOXGLOVE" && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error); then
+    echo "setup: FAILED: npm ci in $FOXGLOVE (is the npm registry reachable?)" >&2
+    exit 1
+  fi
+  stage_done foxglove "$foxglove_key"
 fi
 say "ready: $VENV"

@@ -2,8 +2,8 @@
 
   hopper demo [--strides N] [-o DIR] [--launch FILE] [--timeout S]
 
-Starts the whole graph as separate processes with our launcher (`config/launch/demo.yaml`, 1 kHz
-with the loop's nodes on SCHED_FIFO; where that is not permitted `config/launch/demo_500hz.yaml`:
+Starts the whole graph as separate processes with our launcher (`launch/demo.launch.yaml`, 1 kHz
+with the loop's nodes on SCHED_FIFO; where that is not permitted `launch/demo_500hz.launch.yaml`:
 simulated robot, encoder bridge, state estimator, event detector, deadbeat controller, motor
 driver, setpoint scheduler; their log goes to DIR/launch.log), waits until the graph is up (state
 estimates flowing, drive enabled, controller listening), throws the robot to the first setpoint's
@@ -26,16 +26,16 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from hopper_ros.config import config_path
 from hopper_ros.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority, realtime_scheduling_allowed
+from hopper_ros.launcher import launch_file_path
 
 HELP = "run the closed-loop Fig 5.5 demo on the simulated robot and report it"
-DEFAULT_LAUNCH = "launch/demo.yaml"
-FALLBACK_LAUNCH = "launch/demo_500hz.yaml"   # without SCHED_FIFO (config/launch/demo.yaml says why)
+DEFAULT_LAUNCH = "demo.launch.yaml"
+FALLBACK_LAUNCH = "demo_500hz.launch.yaml"   # without SCHED_FIFO (launch/demo.launch.yaml says why)
 STARTUP_TIMEOUT = 60.0   # [s] until the graph is up
 STOP_TIMEOUT = 20.0      # [s] for the launcher to stop everything
 MONITOR_DEPTH = 200      # queue of each topic the demo follows (events: ~10 per second)
-MONITOR_PRIORITY = 10    # SCHED_FIFO of this process with launch/demo.yaml (its nodes: 50)
+MONITOR_PRIORITY = 10    # SCHED_FIFO of this process with demo.launch.yaml (its nodes: 50)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -69,7 +69,11 @@ def main(args: argparse.Namespace) -> int:
         launch = DEFAULT_LAUNCH if allowed else FALLBACK_LAUNCH
         if not allowed:
             print(f"demo: SCHED_FIFO is not permitted here ({why}): running the 500 Hz graph", flush=True)
-    launch_file = config_path(launch)
+    try:
+        launch_file = launch_file_path(launch)
+    except FileNotFoundError as exc:
+        print(f"demo: error: {exc}", file=sys.stderr)
+        return 2
     if launch == DEFAULT_LAUNCH:
         # the monitor too, below the loop's nodes: with normal scheduling it was starved for strides
         apply_realtime_priority({REALTIME_PRIORITY_VAR: str(MONITOR_PRIORITY)})
@@ -115,7 +119,10 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
 
-    from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorStatus, NodeDiagnostics, StrideCommand
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from hopper_ros.msg import ApexState, BodyState, GaitEvent, MotorStatus, StrideCommand
+    from hopper_ros.nodes.diagnostics import DIAGNOSTICS_TOPIC, split_node_name, status_values
 
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("demo_monitor")
@@ -132,8 +139,9 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
         seen["enabled"] = msg.state == MotorStatus.STATE_OPERATION_ENABLED
 
     def on_diagnostics(msg):
-        if msg.node_name.endswith("sim_robot") and "falls" in msg.counter_names:
-            seen["falls"] = msg.counter_values[list(msg.counter_names).index("falls")]
+        for status in msg.status:
+            if split_node_name(status.name) == ("/", "sim_robot"):
+                seen["falls"] = status_values(status).get("falls", seen["falls"])
 
     best_effort = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
     start_up = [node.create_subscription(BodyState, "body_state", lambda m: seen.__setitem__("state", seen["state"] + 1),
@@ -141,7 +149,7 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
                 node.create_subscription(MotorStatus, "motor_status", on_status, best_effort)]
     # this monitor runs with normal scheduling beside a graph on SCHED_FIFO: it may not run for a
     # while, so its queues hold seconds of the (rare) messages it follows
-    node.create_subscription(NodeDiagnostics, "diagnostics", on_diagnostics, MONITOR_DEPTH)
+    node.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, on_diagnostics, MONITOR_DEPTH)
     node.create_subscription(ApexState, "apex_setpoint", lambda m: seen.__setitem__("setpoint", m), latched)
     node.create_subscription(StrideCommand, "stride_command", lambda m: seen["commands"].__setitem__(m.stride_index, m),
                              MONITOR_DEPTH)

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -46,8 +47,10 @@ from hopper_ros.config import load_yaml
 from hopper_ros.control.closed_loop import decide_at_apex
 from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings, StrideDecision
 from hopper_ros.control.stride_machine import Phase, StrideMachine, StridePlan
-from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, NodeDiagnostics, StrideCommand
+from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
 from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.diagnostics import (DIAGNOSTICS_TOPIC, ERROR, OK, WARN, DiagnosticsReporter, level_of,
+                                          split_node_name)
 from hopper_ros.physics.flight import touchdown_time
 from hopper_ros.physics.params import load_params
 from hopper_ros.physics.predictors import predict_stride
@@ -104,11 +107,11 @@ class DeadbeatControllerNode(Node):
 
         self._command_pub = self.create_publisher(MotorCommand, "motor_command", COMMAND_QOS)
         self._stride_pub = self.create_publisher(StrideCommand, "stride_command", 10)
-        self._diagnostics_pub = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        self._diagnostics = DiagnosticsReporter(self)
         self.create_subscription(ApexState, "apex_setpoint", self._on_setpoint, SETPOINT_QOS)
         self.create_subscription(ApexState, "apex", self._on_apex, 10)
         self.create_subscription(GaitEvent, "gait_event", self._on_event, 10)
-        self.create_subscription(NodeDiagnostics, "diagnostics", self._on_diagnostics, 10)
+        self.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diagnostics, 10)
         self.create_timer(1.0, self._report)
         self.create_timer(self.keep_alive, self._send)
         self._command = MotorCommand()
@@ -180,14 +183,21 @@ class DeadbeatControllerNode(Node):
         return touchdown_time(s.z, s.z_dot, s.leg_angle, s.leg_angle_rate, p.rest_length, p.gravity,
                               p.flight_damping_vertical)
 
-    def _on_diagnostics(self, msg: NodeDiagnostics) -> None:
-        """The motor driver reports a drive fault or a lost drive at once: hold the leg, no torque."""
-        if (msg.node_name.endswith("motor_driver") and msg.level == NodeDiagnostics.ERROR
-                and self.machine.phase is not Phase.SAFE):
-            self.counters["faults"] += 1
-            self.machine.fault(f"motor driver: {msg.message}")
-            self.get_logger().error(self.machine.reason)
-            self._send()
+    def _on_diagnostics(self, msg) -> None:
+        """The motor driver reports a drive fault or a lost drive at once: hold the leg, no torque.
+
+        Every node of every namespace reports on /diagnostics: only a motor driver of our own
+        namespace counts (its node name ends in "motor_driver")."""
+        if self.machine.phase is Phase.SAFE:
+            return
+        for status in msg.status:
+            namespace, name = split_node_name(status.name)
+            if namespace == self.get_namespace() and name.endswith("motor_driver") and level_of(status) == ERROR:
+                self.counters["faults"] += 1
+                self.machine.fault(f"motor driver: {status.message}")
+                self.get_logger().error(self.machine.reason)
+                self._send()
+                return
 
     def _send(self) -> None:
         """The command for now, published when it changed and otherwise every `keep_alive` seconds."""
@@ -245,19 +255,12 @@ class DeadbeatControllerNode(Node):
         self._stride_pub.publish(msg)
 
     def _report(self) -> None:
-        msg = NodeDiagnostics()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.node_name = self.get_fully_qualified_name()
-        msg.counter_names = list(self.counters)
-        msg.counter_values = [int(v) for v in self.counters.values()]
         decision = self.last_decision
-        msg.value_names = ["bias_height_m", "bias_speed_m_s", "decision_time_s", "refine_time_s"]
-        msg.values = [self.controller.bias_height, self.controller.bias_speed,
-                      decision.first_compute_time if decision else math.nan,
-                      decision.compute_time if decision else math.nan]
-        msg.level = NodeDiagnostics.WARN if self.machine.phase is Phase.SAFE else NodeDiagnostics.OK
-        msg.message = self.machine.reason if self.machine.phase is Phase.SAFE else ""
-        self._diagnostics_pub.publish(msg)
+        values = {"bias_height_m": self.controller.bias_height, "bias_speed_m_s": self.controller.bias_speed,
+                  "decision_time_s": decision.first_compute_time if decision else math.nan,
+                  "refine_time_s": decision.compute_time if decision else math.nan}
+        safe = self.machine.phase is Phase.SAFE
+        self._diagnostics.report(self.counters, values, self.machine.reason if safe else "", WARN if safe else OK)
 
 
 def main(args=None):

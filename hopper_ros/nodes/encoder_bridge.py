@@ -7,8 +7,8 @@ packet is published at once (1 kHz) on
   `encoder_sample` (EncoderSample): the raw sample as decoded, stamped with its receive time
     (only while something subscribes: the recorder, `hopper topic echo`),
   `body_measurement` (BodyMeasurement): boom angles, y, z, leg angle, motor current, hip torque;
-a rejected packet is counted and dropped, never published. `diagnostics` (NodeDiagnostics, every
-`diagnostics_period`): counters (packets_received, samples_accepted, packets_lost, malformed_*,
+a rejected packet is counted and dropped, never published. `/diagnostics` (diagnostic_msgs/
+DiagnosticArray, every `diagnostics_period`; hopper_ros.nodes.diagnostics): counters (packets_received, samples_accepted, packets_lost, malformed_*,
 duplicates, reordered, sequence_jump, clock_backwards, clock_inconsistent, stream_resyncs,
 counter_wraps) and values (sample_rate_hz, loss_ratio over the period, process_time_max_s,
 measurement_subscribers: the subscriptions body_measurement is matched with).
@@ -33,11 +33,12 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 from hopper_ros.config import load_yaml
-from hopper_ros.msg import BodyMeasurement, EncoderSample, NodeDiagnostics
+from hopper_ros.msg import BodyMeasurement, EncoderSample
 from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.sensing.bridge import MALFORMED, ORDER, EncoderBridge
 from hopper_ros.sensing.config import load_sensing_config
-from hopper_ros.sensing.messages import (CounterDeltas, any_of, diagnostics_msg, fill_body_measurement,
+from hopper_ros.sensing.messages import (CounterDeltas, any_of, fill_body_measurement,
                                          fill_encoder_sample, sample_qos)
 
 RECEIVE_TIMEOUT = 0.2     # [s] the receiving thread checks for shutdown this often
@@ -68,7 +69,7 @@ class EncoderBridgeNode(Node):
         qos = sample_qos(config.queue_depth)
         self._samples = self.create_publisher(EncoderSample, "encoder_sample", qos)
         self._measurements = self.create_publisher(BodyMeasurement, "body_measurement", qos)
-        self._diagnostics = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        self._diagnostics = DiagnosticsReporter(self, f"microcontroller udp {host}:{port}")
         self.create_timer(period, self._report)
         self._deltas = CounterDeltas()
         self._reported_problem = ""
@@ -128,8 +129,7 @@ class EncoderBridgeNode(Node):
         if new_problem and problem != self._reported_problem:
             self.get_logger().warning(problem)
             self._reported_problem = problem
-        self._diagnostics.publish(diagnostics_msg(self.get_fully_qualified_name(), now, counters, values,
-                                                  problem if new_problem else ""))
+        self._diagnostics.report(counters, values, problem if new_problem else "", stamp=now)
 
     def destroy_node(self):
         self._stop.set()

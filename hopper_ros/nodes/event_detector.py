@@ -5,8 +5,8 @@ Subscribes `body_state` (BodyState, from state_estimator); publishes every event
 stride index; detection_delay = host time of publication minus the event's time, negative for a
 pre-touchdown published ahead; the state at the event, `state.sequence` the sample that revealed
 it) and each apex also on `apex` (ApexState: height, forward speed, y, leg angle; stride_index n
-opens stride n), which stride_predictor and setpoint_scheduler consume. `diagnostics`
-(NodeDiagnostics, every `diagnostics_period`): counters (samples, untrusted_samples, track_lost,
+opens stride n), which stride_predictor and setpoint_scheduler consume. `/diagnostics`
+(DiagnosticArray, every `diagnostics_period`): counters (samples, untrusted_samples, track_lost,
 track_acquired, strides, one per event type, late_samples: states that arrived more than
 `sample_deadline` after their sample's instant, i.e. the loop's missed deadlines) and values
 (detection_delay_max_s, sample_age_max_s and process_time_max_s over the period).
@@ -26,12 +26,13 @@ import time
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
-from hopper_ros.msg import ApexState, BodyState, GaitEvent, NodeDiagnostics
+from hopper_ros.msg import ApexState, BodyState, GaitEvent
 from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.sensing.events import EventDetector
-from hopper_ros.sensing.messages import (CounterDeltas, any_of, apex_state_msg, diagnostics_msg,
+from hopper_ros.sensing.messages import (CounterDeltas, any_of, apex_state_msg,
                                          estimate_from_msg, gait_event_msg, sample_qos, to_seconds)
 from hopper_ros.sensing.samples import EventType
 
@@ -50,7 +51,7 @@ class EventDetectorNode(Node):
         self.detector = EventDetector(load_params(model_file), config.detector)
         self._events = self.create_publisher(GaitEvent, "gait_event", sample_qos(EVENT_DEPTH))
         self._apexes = self.create_publisher(ApexState, "apex", 10)
-        self._diagnostics = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        self._diagnostics = DiagnosticsReporter(self)
         self.create_subscription(BodyState, "body_state", self._on_state, sample_qos(config.queue_depth))
         self.create_timer(period, self._report)
         self._deltas = CounterDeltas()
@@ -91,7 +92,7 @@ class EventDetectorNode(Node):
         if not problem and deltas["late_samples"]:
             problem = (f"{deltas['late_samples']} of {deltas['samples']} states came more than "
                        f"{self._deadline * 1e3:g} ms after their sample (the loop misses its deadline)")
-        self._diagnostics.publish(diagnostics_msg(self.get_fully_qualified_name(), now, counters, values, problem))
+        self._diagnostics.report(counters, values, problem, stamp=now)
 
 
 def main(args=None) -> int:

@@ -2,7 +2,7 @@
 
 Subscribes `motor_command` (MotorCommand: disabled, hip torque [N m] or leg angle [rad]);
 publishes `motor_status` (MotorStatus) after every `status_decimation`-th SYNC's TPDOs (1: 1 kHz),
-at least every `status_period`, and `diagnostics` (NodeDiagnostics) every `diagnostics_period` and at once on a
+at least every `status_period`, and `/diagnostics` (DiagnosticArray) every `diagnostics_period` and at once on a
 new problem. A thread of its own runs the 1 kHz CAN cycle (SYNC, PDOs, state machine, watchdog);
 commands reach the bus from the subscription callback at once.
 
@@ -41,8 +41,10 @@ from hopper_ros.motor_driver import (
     load_section,
     open_bus,
 )
-from hopper_ros.msg import MotorCommand, MotorStatus, NodeDiagnostics
+from hopper_ros.msg import MotorCommand, MotorStatus
+from hopper_ros.nodes import diagnostics
 from hopper_ros.nodes.common import run_node, stop_requested
+from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 
 #: commands: the latest one matters (a stale one is worse than none); matches reliable publishers too
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -103,7 +105,9 @@ class MotorDriverNode(Node):
             self._bus.shutdown()
             raise
         self._status_pub = self.create_publisher(MotorStatus, "motor_status", 10)
-        self._diagnostics_pub = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        bus = hardware.get("can", {})
+        self._diagnostics = DiagnosticsReporter(
+            self, f"EPOS2 node {self._driver.node_id} on CAN {bus_overrides.get('interface') or bus.get('interface', '')}")
         self.create_subscription(MotorCommand, "motor_command", self._on_command, COMMAND_QOS)
         self.create_timer(diagnostics_period, self._publish_diagnostics)
         self._last_status = 0.0
@@ -149,16 +153,10 @@ class MotorDriverNode(Node):
             status = self._driver.status
             values = [self._driver.settings.command_timeout, status.current, status.position]
         elapsed = max(time.monotonic() - self._started, 1e-9)
-        msg = NodeDiagnostics()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.node_name = self.get_fully_qualified_name()
-        msg.level = {INFO: NodeDiagnostics.OK, WARN: NodeDiagnostics.WARN, ERROR: NodeDiagnostics.ERROR}[level]
-        msg.message = message
-        msg.counter_names = [*COUNTER_NAMES, "cycle_overruns"]
-        msg.counter_values = [*counters, self._overruns]
-        msg.value_names = ["command_timeout_s", "current_a", "position_rad", "cycle_rate_hz"]
-        msg.values = [*values, self._cycles / elapsed]
-        self._diagnostics_pub.publish(msg)
+        self._diagnostics.report(
+            {**dict(zip(COUNTER_NAMES, counters)), "cycle_overruns": self._overruns},
+            dict(zip(["command_timeout_s", "current_a", "position_rad", "cycle_rate_hz"], [*values, self._cycles / elapsed])),
+            message, {INFO: diagnostics.OK, WARN: diagnostics.WARN, ERROR: diagnostics.ERROR}[level])
 
     def _log(self, events) -> None:
         logger = self.get_logger()

@@ -4,6 +4,8 @@ Publishes `apex_setpoint` (hopper_ros/msg/ApexState: apex_height [m], forward_sp
 a latched QoS (reliable, transient local, depth 1): a subscriber that starts later still gets the
 setpoint in force. A new message goes out whenever the schedule advances: after a number of
 apexes (counted on `apex`, ApexState, from the event detector) or after a number of seconds.
+`/diagnostics` (DiagnosticArray, every second): setpoints published, apexes counted, the segment
+and setpoint in force.
 
 Parameters:
   schedule_file (string, read only): the schedule, a path or relative to the config directory;
@@ -21,11 +23,13 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from hopper_ros.msg import ApexState
 from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.diagnostics import OK, DiagnosticsReporter
 from hopper_ros.setpoints import ScheduleRunner, load_schedule
 
 DEFAULT_SCHEDULE = "setpoints/fig5_5.yaml"
 SETPOINT_TOPIC = "apex_setpoint"
 APEX_TOPIC = "apex"
+DIAGNOSTICS_PERIOD = 1.0  # [s]
 
 # Latched: the last setpoint is kept for late-joining subscribers (they must ask for
 # TRANSIENT_LOCAL too).
@@ -52,6 +56,9 @@ class SetpointScheduler(Node):
         self._finished_reported = False
         self._publisher = self.create_publisher(ApexState, SETPOINT_TOPIC, SETPOINT_QOS)
         self._subscription = self.create_subscription(ApexState, APEX_TOPIC, self._on_apex, 10)
+        self._counters = {"setpoints_published": 0, "apexes": 0}
+        self._diagnostics = DiagnosticsReporter(self)
+        self.create_timer(DIAGNOSTICS_PERIOD, self._report)
         self.get_logger().info(
             f"schedule {schedule_file}: {len(self._runner.schedule.segments)} segments"
             + (", repeated" if self._runner.schedule.repeat else "")
@@ -63,6 +70,7 @@ class SetpointScheduler(Node):
 
     def _on_apex(self, msg: ApexState) -> None:
         self._stride_index = msg.stride_index
+        self._counters["apexes"] += 1
         if self._runner.on_apex(self._now()):
             self._publish()
         elif self._runner.finished and self._runner.segment.strides is not None:
@@ -84,9 +92,16 @@ class SetpointScheduler(Node):
         msg.apex_height = segment.apex_height
         msg.forward_speed = segment.forward_speed
         self._publisher.publish(msg)
+        self._counters["setpoints_published"] += 1
         count = len(self._runner.schedule.segments)
         self.get_logger().info(f"setpoint {self._runner.index + 1}/{count}: {segment.describe()}")
         self._arm_timer()
+
+    def _report(self) -> None:
+        segment = self._runner.segment
+        self._diagnostics.report(self._counters, {"segment": self._runner.index + 1, "apex_height_m": segment.apex_height,
+                                                  "forward_speed_m_s": segment.forward_speed},
+                                 "schedule finished" if self._runner.finished else "", OK)
 
     def _report_finished(self) -> None:
         if not self._finished_reported:

@@ -44,8 +44,9 @@ from builtin_interfaces.msg import Time as TimeMsg
 
 from hopper_ros.config import load_yaml
 from hopper_ros.hardware import packet as packet_format
-from hopper_ros.msg import ApexState, BodyState, GaitEvent, GroundReactionForce, NodeDiagnostics
+from hopper_ros.msg import ApexState, BodyState, GaitEvent, GroundReactionForce
 from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.diagnostics import OK, WARN, DiagnosticsReporter
 from hopper_ros.sim.config import load_sim_config
 from hopper_ros.sim.experiment import ExperimentSeries
 from hopper_ros.sim.robot import SimRobot, SimSample
@@ -128,7 +129,7 @@ class SimRobotNode(Node):
         self._force = self.create_publisher(GroundReactionForce, "force_plate", 100)
         self._truth = self.create_publisher(BodyState, "sim/truth", 100)
         self._events = self.create_publisher(GaitEvent, "sim/events", 100)
-        self._diagnostics = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        self._diagnostics = DiagnosticsReporter(self, "simulated robot")
         self.create_subscription(ApexState, "sim/throw", self._on_throw, 10)
         self.create_timer(DIAGNOSTICS_PERIOD, self._report)
 
@@ -235,19 +236,11 @@ class SimRobotNode(Node):
         return self.robot.t / wall if wall > 0 else 0.0
 
     def _report(self) -> None:
-        msg = NodeDiagnostics()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.node_name = self.get_fully_qualified_name()
         counters = dict(self.counters)
         if self.drive is not None:
             counters.update({f"drive_{k}": v for k, v in dataclasses.asdict(self.drive.counters).items()})
-        msg.counter_names = list(counters)
-        msg.counter_values = [int(v) for v in counters.values()]
-        msg.value_names = ["sim_time_s", "realtime_factor"]
-        msg.values = [self.robot.t, self.realtime_factor()]
-        msg.level = NodeDiagnostics.WARN if counters["falls"] else NodeDiagnostics.OK
-        msg.message = "the robot fell" if counters["falls"] else ""
-        self._diagnostics.publish(msg)
+        self._diagnostics.report(counters, {"sim_time_s": self.robot.t, "realtime_factor": self.realtime_factor()},
+                                 "the robot fell" if counters["falls"] else "", WARN if counters["falls"] else OK)
 
     def destroy_node(self):
         self._stop.set()

@@ -6,7 +6,7 @@ filters, A.1.1), the leg angle and its rate, the covariance diagonal, stamped wi
 instant on the host clock. Samples missing from the stream are bridged by predictions (one
 BodyState per missing sample, `measurement_used` false, dt from the microcontroller clock); a
 sample whose innovation fails the Mahalanobis gate is not used (`outlier_rejected`).
-`diagnostics` (NodeDiagnostics, every `diagnostics_period`): counters (measurements,
+`/diagnostics` (DiagnosticArray, every `diagnostics_period`): counters (measurements,
 predicted_samples, outliers_y/_z/_leg_angle, reinitialisations, stale_measurements) and values
 (sample_rate_hz, clock_offset_s, z_dot_std_m_per_s, process_time_max_s, state_subscribers: the
 subscriptions body_state is matched with).
@@ -28,11 +28,12 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 from hopper_ros.config import load_yaml
-from hopper_ros.msg import BodyMeasurement, BodyState, NodeDiagnostics
+from hopper_ros.msg import BodyMeasurement, BodyState
 from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.sensing.estimator import StateEstimator
-from hopper_ros.sensing.messages import (CounterDeltas, any_of, diagnostics_msg, fill_body_state,
+from hopper_ros.sensing.messages import (CounterDeltas, any_of, fill_body_state,
                                          measurement_from_msg, sample_qos)
 
 PROBLEM_COUNTERS = ("predicted_samples", "outliers_y", "outliers_z", "outliers_leg_angle", "reinitialisations",
@@ -53,7 +54,7 @@ class StateEstimatorNode(Node):
         self._state_msg = BodyState()
         qos = sample_qos(config.queue_depth)
         self._states = self.create_publisher(BodyState, "body_state", qos)
-        self._diagnostics = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        self._diagnostics = DiagnosticsReporter(self)
         self.create_subscription(BodyMeasurement, "body_measurement", self._on_measurement, qos)
         self.create_timer(period, self._report)
         self._deltas = CounterDeltas()
@@ -88,7 +89,7 @@ class StateEstimatorNode(Node):
         }
         self._process_time_max = 0.0
         problem = self.estimator.last_problem if any_of(deltas, PROBLEM_COUNTERS) else ""
-        self._diagnostics.publish(diagnostics_msg(self.get_fully_qualified_name(), now, counters, values, problem))
+        self._diagnostics.report(counters, values, problem, stamp=now)
 
 
 def main(args=None) -> int:

@@ -4,7 +4,7 @@ Subscribes `apex` (ApexState, from the event detector) and `stride_command` (Str
 from the controller or an experiment); for each stride with both it publishes the predicted
 next apex on `predicted_apex` (ApexState, stamped with the predicted apex time), and when that
 apex arrives it logs E_p, E_v, E_t (4.1)-(4.3) and publishes them with running means on
-`diagnostics` (NodeDiagnostics).
+`/diagnostics` (DiagnosticArray; then, and every second).
 
 Parameters (read only):
   model_file (string): model parameters, default `model.yaml` (config/model.yaml, Table 4.1)
@@ -21,8 +21,9 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.time import Time
 
-from hopper_ros.msg import ApexState, NodeDiagnostics, StrideCommand
+from hopper_ros.msg import ApexState, StrideCommand
 from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.physics.params import load_params
 from hopper_ros.physics.predictors import DEFAULT_PREDICTOR
 from hopper_ros.stride_monitor import Apex, Command, StrideMonitor
@@ -40,7 +41,9 @@ class StridePredictor(Node):
         method = self.declare_parameter("predictor", DEFAULT_PREDICTOR, read_only("corrected, aas or exact")).value
         self._monitor = StrideMonitor(load_params(model_file), method)
         self._predicted = self.create_publisher(ApexState, "predicted_apex", 10)
-        self._diagnostics = self.create_publisher(NodeDiagnostics, "diagnostics", 10)
+        self._diagnostics = DiagnosticsReporter(self)
+        self._problem = ""
+        self.create_timer(1.0, self._on_timer)
         self.create_subscription(ApexState, "apex", self._on_apex, 10)
         self.create_subscription(StrideCommand, "stride_command", self._on_command, 10)
         self.get_logger().info(f"predicting strides with the {method} predictor, model {model_file}")
@@ -52,7 +55,7 @@ class StridePredictor(Node):
             self.get_logger().info(
                 f"stride {score.stride_index - 1}: E_p {score.position_error_pct:.2f} %, "
                 f"E_v {score.velocity_error_pct:.2f} %, E_t {score.time_error_pct:.2f} %")
-            self._report()
+            self._report("")
         self._publish(prediction)
 
     def _on_command(self, msg: StrideCommand) -> None:
@@ -73,21 +76,23 @@ class StridePredictor(Node):
         msg.apex_height, msg.forward_speed, msg.y = prediction.apex_height, prediction.forward_speed, prediction.y
         self._predicted.publish(msg)
 
-    def _report(self, problem: str = "") -> None:
+    def _on_timer(self) -> None:
+        # not the timer's callback itself: rclpy hands a callback with a parameter its TimerInfo
+        self._report()
+
+    def _report(self, problem: str | None = None) -> None:
+        """E_p, E_v, E_t of the last stride and their means; WARN while the last stride was predicted to fail."""
+        if problem is not None:
+            self._problem = problem
         monitor = self._monitor
-        msg = NodeDiagnostics()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.node_name = self.get_fully_qualified_name()
-        msg.level = NodeDiagnostics.WARN if problem else NodeDiagnostics.OK
-        msg.message = problem
-        msg.counter_names = ["strides_predicted", "strides_scored", "strides_predicted_infeasible"]
-        msg.counter_values = [monitor.predicted, len(monitor.scores), monitor.infeasible]
+        counters = {"strides_predicted": monitor.predicted, "strides_scored": len(monitor.scores),
+                    "strides_predicted_infeasible": monitor.infeasible}
         means = monitor.mean_errors()
         last = monitor.scores[-1] if monitor.scores else None
-        msg.value_names = ["last_Ep_pct", "last_Ev_pct", "last_Et_pct", "mean_Ep_pct", "mean_Ev_pct", "mean_Et_pct"]
-        msg.values = [last.position_error_pct if last else math.nan, last.velocity_error_pct if last else math.nan,
-                      last.time_error_pct if last else math.nan, *means]
-        self._diagnostics.publish(msg)
+        values = dict(zip(["last_Ep_pct", "last_Ev_pct", "last_Et_pct", "mean_Ep_pct", "mean_Ev_pct", "mean_Et_pct"],
+                          [last.position_error_pct if last else math.nan, last.velocity_error_pct if last else math.nan,
+                           last.time_error_pct if last else math.nan, *means]))
+        self._diagnostics.report(counters, values, self._problem)
 
 
 def main(args=None) -> int:

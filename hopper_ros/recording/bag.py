@@ -1,7 +1,13 @@
 """rosbag2 bags as ROS 2 itself writes them with the MCAP storage plugin: a folder holding
 `metadata.yaml` and `<folder>_0.mcap` (profile "ros2", messages "cdr", schemas "ros2msg" with
-their dependencies, zstd-compressed chunks, message and chunk indexes, statistics and a
-summary section).
+their dependencies as rosbag2 writes them (schemas.py), channels with `offered_qos_profiles`
+and `topic_type_hash`, zstd-compressed chunks, message and chunk indexes, statistics, a
+summary section and the bag's metadata as the "rosbag2" metadata record).
+
+metadata.yaml is rosbag2's (Kilted, rosbag2_storage metadata version 9): the same keys in the
+same order, emitted in yaml-cpp's style (sequences indented under their key, `~` for an empty
+custom_data, `""` for empty strings, no newline after the last line), so that it reads as one
+`ros2 bag record` wrote (rosbag2_storage/include/rosbag2_storage/yaml.hpp).
 
 Crash safety. Every byte the MCAP writer produces goes straight to the file (no user-space
 buffer), and a chunk is closed when it reaches `chunk_size` bytes or `chunk_interval` seconds,
@@ -141,10 +147,33 @@ def metadata_document(file_name: str, topics: Mapping[str, TopicInfo], start_ns:
     }}
 
 
+class _YamlCppStyle(yaml.SafeDumper):
+    """PyYAML emitting what yaml-cpp's emitter (rosbag2's) writes for the same document."""
+
+    def increase_indent(self, flow: bool = False, indentless: bool = False):
+        return super().increase_indent(flow, False)      # "key:\n  - item", as yaml-cpp
+
+    def choose_scalar_style(self):
+        style = super().choose_scalar_style()
+        return '"' if style in ("'", "|", ">") else style  # yaml-cpp quotes what cannot be plain with ""
+
+
+_YamlCppStyle.add_representer(type(None), lambda dumper, _: dumper.represent_scalar("tag:yaml.org,2002:null", "~"))
+_YamlCppStyle.add_representer(
+    str, lambda dumper, value: dumper.represent_scalar("tag:yaml.org,2002:str", value,
+                                                       style='"' if value == "" or "\n" in value else None))
+
+
+def dump_yaml_cpp_style(data: Any) -> str:
+    """`YAML::Dump` of `data` as rosbag2 writes it (no newline after the last line)."""
+    return yaml.dump(data, Dumper=_YamlCppStyle, sort_keys=False, default_flow_style=False, allow_unicode=True,
+                     width=1 << 30).rstrip("\n")
+
+
 def _write_metadata_file(folder: Path, document: dict) -> Path:
     path = folder / "metadata.yaml"
     temporary = folder / "metadata.yaml.tmp"
-    temporary.write_text(yaml.safe_dump(document, sort_keys=False), encoding="utf-8")
+    temporary.write_text(dump_yaml_cpp_style(document), encoding="utf-8")
     os.replace(temporary, path)
     return path
 
@@ -204,10 +233,12 @@ class BagWriter:
             schema_id = self._writer.register_schema(type_name, "ros2msg", message_definition(type_name).encode())
             self._schemas[type_name] = schema_id
         qos = copy.deepcopy(list(qos_profiles) if qos_profiles is not None else [DEFAULT_QOS])
+        digest = type_hash(type_name)
+        # as rosbag2's MCAP storage plugin (mcap_storage.cpp create_topic)
         self._channels[name] = self._writer.register_channel(
             topic=name, message_encoding="cdr", schema_id=schema_id,
-            metadata={"offered_qos_profiles": yaml.safe_dump(qos, sort_keys=False)})
-        self.topics[name] = TopicInfo(name, type_name, 0, qos, type_hash(type_name))
+            metadata={"offered_qos_profiles": dump_yaml_cpp_style(qos), "topic_type_hash": digest})
+        self.topics[name] = TopicInfo(name, type_name, 0, qos, digest)
         return name
 
     # ------------------------------------------------------------------ messages
@@ -262,8 +293,8 @@ class BagWriter:
         if self.closed:
             return self.path
         document = self.metadata()
-        self._writer.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(
-            document["rosbag2_bagfile_information"], sort_keys=False)})
+        self._writer.add_metadata("rosbag2", {"serialized_metadata": dump_yaml_cpp_style(
+            document["rosbag2_bagfile_information"])})
         self._writer.finish()
         self._stream.fsync()
         self._stream.close()
@@ -635,8 +666,8 @@ def recover_bag(path: str | os.PathLike) -> Recovery:
             writer.add_message(channel_ids[channel_id], log_time, data, publish_time, sequence)
         start, end = _count_topics(messages, scan, topics)
         document = metadata_document(source.name, topics, start, end, custom)
-        writer.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(
-            document["rosbag2_bagfile_information"], sort_keys=False)})
+        writer.add_metadata("rosbag2", {"serialized_metadata": dump_yaml_cpp_style(
+            document["rosbag2_bagfile_information"])})
         writer.finish()
         stream.fsync()
         stream.close()

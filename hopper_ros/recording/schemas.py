@@ -1,11 +1,19 @@
 """ROS 2 message definitions as rosbag2 embeds them in MCAP schemas (encoding "ros2msg").
 
-A schema is the type's own .msg text followed, for every message type it uses (recursively),
-by a separator line of 80 '=' and "MSG: pkg/msg/Type" and that type's .msg text, as rosbag2
-writes it. Definitions are read from the installed interface packages
-(`<prefix>/share/<pkg>/msg/<Type>.msg`, found through the ament index); hopper_ros's own come
-from the repository's msg/ when the package is not installed. Type hashes (RIHS01) come from
-the generated `<Type>.json` next to the .msg when present.
+The text is exactly what rosbag2's `LocalMessageDefinitionSource`
+(rosbag2_cpp/src/rosbag2_cpp/message_definitions/local_message_definition_source.cpp) writes
+for the same type: the type's own .msg file as it is on disk, then, depth first, for every
+message type a definition uses (found with rosbag2's field regex, each definition's
+dependencies in sorted order, each type once) a newline, a separator line of 80 '=',
+"MSG: " and the type as the field names it (`std_msgs/Header`, or `pkg/Type` for a type of the
+same package), a newline and that type's .msg file. Readers resolve a field's type by that
+name: Foxglove (@foxglove/rosmsg) finds nothing for `std_msgs/Header` under a
+`MSG: std_msgs/msg/Header` heading and rejects the whole schema.
+
+Definitions are read from the installed interface packages (`<prefix>/share/<pkg>/msg/<Type>.msg`,
+found through the ament index); hopper_ros's own come from the repository's msg/ when the
+package is not installed. Type hashes (RIHS01) come from the generated `<Type>.json` next to
+the .msg when present.
 """
 
 from __future__ import annotations
@@ -57,48 +65,39 @@ def msg_file(type_name: str) -> Path:
                       f"the ament index (is the package installed?)")
 
 
-def _field_types(text: str, package: str) -> list[str]:
-    """Message types (pkg/msg/Type) that the fields of one .msg text use."""
-    used = []
-    for line in text.splitlines():
-        line = line.split("#", 1)[0].strip()
-        if not line:
+# rosbag2's MSG_FIELD_TYPE_REGEX and PRIMITIVE_TYPES (plus wstring, which rosbag2 cannot resolve)
+_FIELD_TYPE = re.compile(r"(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+")
+
+
+def _dependencies(text: str, package: str) -> list[str]:
+    """The message types one .msg text uses, named as rosbag2 names them, sorted (a std::set)."""
+    found = set()
+    for match in _FIELD_TYPE.finditer(text):
+        name = match.group(1)
+        if name in PRIMITIVES:
             continue
-        parts = line.split()
-        if len(parts) < 2 or "=" in parts[1] or (len(parts) > 2 and parts[2].startswith("=")):
-            continue  # a constant
-        base = re.sub(r"\[.*\]$", "", parts[0])          # arrays: T[], T[N], T[<=N]
-        base = re.sub(r"<=\d+$", "", base)                 # bounded strings
-        if base in PRIMITIVES:
-            continue
-        if base == "Header":
-            used.append("std_msgs/msg/Header")
-        elif "/" in base:
-            pkg, _, name = base.partition("/")
-            used.append(f"{pkg}/msg/{name.split('/')[-1]}")
-        else:
-            used.append(f"{package}/msg/{base}")
-    return used
+        found.add(name if "/" in name else f"{package}/{name}")
+    return sorted(found)
 
 
 @lru_cache(maxsize=None)
 def message_definition(type_name: str) -> str:
     """The rosbag2 ("ros2msg") definition of a message type, its dependencies appended."""
     package, interface, name = split_type_name(type_name)
-    root = f"{package}/{interface}/{name}"
-    text = msg_file(root).read_text(encoding="utf-8")
-    parts = [text.rstrip("\n")]
-    seen = {root}
-    queue = _field_types(text, package)
-    while queue:
-        dependency = queue.pop(0)
-        if dependency in seen:
-            continue
-        seen.add(dependency)
-        dep_text = msg_file(dependency).read_text(encoding="utf-8")
-        parts.append(f"{SEPARATOR}\nMSG: {dependency}\n{dep_text.rstrip(chr(10))}")
-        queue.extend(_field_types(dep_text, dependency.split("/")[0]))
-    return "\n".join(parts) + "\n"
+    seen: set[str] = set()
+
+    def append(type_text: str, dependency_package: str, depth: int) -> str:
+        if depth <= 0:
+            raise SchemaError(f"message definition of {type_name!r} nests too deep")
+        text = msg_file(type_text).read_text(encoding="utf-8")
+        out = text
+        for dependency in _dependencies(text, dependency_package):
+            if dependency not in seen:
+                seen.add(dependency)
+                out += f"\n{SEPARATOR}\nMSG: {dependency}\n" + append(dependency, dependency.split("/")[0], depth - 1)
+        return out
+
+    return append(f"{package}/{interface}/{name}", package, 50)
 
 
 @lru_cache(maxsize=None)

@@ -12,7 +12,7 @@ from typing import Mapping, Sequence
 from builtin_interfaces.msg import Time as TimeMsg
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from hopper_ros.msg import ApexState, BodyMeasurement, BodyState, EncoderSample, GaitEvent, NodeDiagnostics
+from hopper_ros.msg import ApexState, BodyMeasurement, BodyState, EncoderSample, GaitEvent
 
 from .bridge import BridgeSample
 from .samples import DetectedEvent, Estimate, Measurement
@@ -115,25 +115,6 @@ def apex_state_msg(event: DetectedEvent) -> ApexState:
 
 
 # ---------------------------------------------------------------------- diagnostics
-def diagnostics_msg(node_name: str, stamp_seconds: float, counters: Mapping[str, int],
-                    values: Mapping[str, float], problem: str = "", level: int | None = None) -> NodeDiagnostics:
-    msg = NodeDiagnostics()
-    to_time(stamp_seconds, msg.header.stamp)
-    msg.node_name = node_name
-    msg.level = level if level is not None else (NodeDiagnostics.WARN if problem else NodeDiagnostics.OK)
-    msg.message = problem
-    msg.counter_names = list(counters)
-    msg.counter_values = [int(v) for v in counters.values()]
-    msg.value_names = list(values)
-    msg.values = [float(v) if v is not None else math.nan for v in values.values()]
-    return msg
-
-
-def diagnostics_dict(msg: NodeDiagnostics) -> tuple[dict[str, int], dict[str, float]]:
-    """(counters, values) of a NodeDiagnostics message."""
-    return dict(zip(msg.counter_names, msg.counter_values)), dict(zip(msg.value_names, msg.values))
-
-
 class CounterDeltas:
     """Counter changes since the last report, for per-period rates and "new problem" levels."""
 
