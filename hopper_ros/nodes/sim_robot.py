@@ -56,23 +56,24 @@ RESYNC_LATENESS = 0.05     # [s] further behind than this, real-time mode stops 
 
 
 def open_drive(can_setting: str, hardware: dict, port: int):
-    """The emulated EPOS2 on the bus `can_setting` names; returns (drive, closer) or (None, None)."""
+    """The emulated EPOS2 on the bus `can_setting` names; returns (drive, closer, hub or None),
+    (None, None, None) for no drive."""
     if can_setting == "none":
-        return None, None
+        return None, None, None
     import can
 
     from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 
     if can_setting.startswith("virtual:"):
         bus = can.Bus(interface="virtual", channel=can_setting.split(":", 1)[1], receive_own_messages=False)
-        return Epos2Emulator(bus, hardware), bus.shutdown
+        return Epos2Emulator(bus, hardware), bus.shutdown, None
     if can_setting == "hub":
         from hopper_ros.canbus.socketcand_server import SocketcandServer
 
         settings = hardware["can"]
         server = SocketcandServer(host=settings["host"], port=port, channel=settings["channel"])
         server.start()
-        return Epos2Emulator(server.local_bus(), hardware), server.close
+        return Epos2Emulator(server.local_bus(), hardware), server.close, server
     raise ValueError(f"can must be 'hub', 'virtual:CHANNEL' or 'none', got {can_setting!r}")
 
 
@@ -114,7 +115,7 @@ class SimRobotNode(Node):
 
         if experiments and can_setting != "none":
             raise ValueError("experiments:=true runs the hip itself: it needs can:=none (no drive on a bus)")
-        self.drive, self._close_drive = open_drive(can_setting, hardware, can_port)
+        self.drive, self._close_drive, self.hub = open_drive(can_setting, hardware, can_port)
         self.robot = SimRobot(config, hardware, drive=self.drive)
         self.robot.throw(apex_height, forward_speed, leg_angle, lead_time=self.throw_lead, hold=hold)
         self.series = ExperimentSeries(self.robot, seed=config.seed) if experiments else None
@@ -240,6 +241,8 @@ class SimRobotNode(Node):
         counters = dict(self.counters)
         if self.drive is not None:
             counters.update({f"drive_{k}": v for k, v in dataclasses.asdict(self.drive.counters).items()})
+        if self.hub is not None:         # clients dropped for not reading, garbage, ...
+            counters.update({f"hub_{k}": v for k, v in dataclasses.asdict(self.hub.counters).items()})
         msg.counter_names = list(counters)
         msg.counter_values = [int(v) for v in counters.values()]
         msg.value_names = ["sim_time_s", "realtime_factor"]
