@@ -25,7 +25,9 @@ PDOs (RPDOs event-driven so a command acts when it arrives; TPDOs on every SYNC)
 Exactly one RPDO per SYNC period unless commands arrive faster.
 
 Safety: the drive is enabled only while valid commands keep arriving (`command_timeout`; a stale
-stream ends in quick stop, then disable voltage), the drive's heartbeat is alive and the bus has
+stream ends with the current setpoint zeroed and a quick stop in the same RPDO, then disable
+voltage as soon as the drive reports QUICK STOP ACTIVE, `quick_stop_time` after the trip at the
+latest), the drive's heartbeat is alive and the bus has
 been free of errors for `bus_error_holdoff`. A fault is reset at start-up and after the command
 stream acknowledged it with a disable command. Units: SI at this module's edges, drive units
 (mA, qc, rpm) only in the frames.
@@ -123,8 +125,9 @@ class DriverSettings:
     sync_period: float = 0.001          # [s] SYNC / PDO exchange period
     rpdo_refresh: float = 0.01          # [s] an unchanged RPDO is sent again this often (else every change)
     max_ramp_age: float = 0.005         # [s] MODE_RAMP: a ramp command older than this starts this far back
-    command_timeout: float = 0.02       # [s] no valid command this long: quick stop, then disable
-    quick_stop_time: float = 0.01       # [s] longest QUICK STOP ACTIVE before disable voltage
+    command_timeout: float = 0.01       # [s] no valid command this long: current 0, quick stop, then disable
+    quick_stop_time: float = 0.001      # [s] quick stop at most this long after the watchdog tripped, then
+                                        #   disable voltage (at once when the drive reports QUICK STOP ACTIVE)
     heartbeat_timeout: float = 0.3      # [s] drive heartbeat missing this long: lost
     master_node_id: int = 0x7F          # our heartbeat's node id (COB-ID 0x700 + id)
     master_heartbeat_period: float = 0.02  # [s] our heartbeat; 0: none
@@ -287,7 +290,7 @@ class MotorDriver:
         self._last_command: float | None = None
         self._want_enabled = False
         self._quick_stop = False
-        self._quick_stop_since: float | None = None
+        self._watchdog_at = -math.inf       # when the command watchdog last tripped
         self._bus_error_at: float | None = None
         self._reset_armed = True            # a fault found at start-up is reset
         self._reset_edges = 0
@@ -381,11 +384,7 @@ class MotorDriver:
             return
         if self.phase is not Phase.RUNNING:
             return
-        if self._want_enabled and now - self._last_command > self.settings.command_timeout:
-            self._want_enabled, self._quick_stop = False, True
-            self.counters["watchdog_stops"] += 1
-            self._event(WARN, f"no motor command for {(now - self._last_command) * 1e3:.1f} ms: quick stop, "
-                              "then disable")
+        self._trip_watchdog(now)
         if self._sync_outstanding and self._tpdo_seen != (1 << len(TPDO_MAPPINGS)) - 1:
             self.counters["tpdo_missed"] += 1
         self._send_rpdo(now, force=False)
@@ -394,6 +393,34 @@ class MotorDriver:
         if self._send(sync_frame()):
             self.counters["sync_sent"] += 1
             self._sync_outstanding = True
+
+    def watchdog_deadline(self) -> float:
+        """When the command watchdog trips unless a valid command comes first (inf: not armed)."""
+        if self.phase is Phase.RUNNING and self._want_enabled and self._last_command is not None:
+            return self._last_command + self.settings.command_timeout
+        return math.inf
+
+    def watchdog(self) -> bool:
+        """Trip the command watchdog now if it is due (the RPDO goes out at once); True if it tripped.
+
+        `cycle()` checks it every SYNC period; a caller that waits between cycles calls this at
+        `watchdog_deadline()` so the trip is not up to a period late."""
+        now = self.clock()
+        if self.phase is not Phase.RUNNING or not self._trip_watchdog(now):
+            return False
+        self._send_rpdo(now, force=True)
+        return True
+
+    def _trip_watchdog(self, now: float) -> bool:
+        if not (self._want_enabled and now - self._last_command > self.settings.command_timeout):
+            return False
+        self._want_enabled, self._quick_stop = False, True
+        self._watchdog_at = now
+        self._current_ma, self._ramp = 0, None           # the current command zeroed at once
+        self.counters["watchdog_stops"] += 1
+        self._event(WARN, f"no motor command for {(now - self._last_command) * 1e3:.1f} ms: current zeroed, "
+                          "quick stop, then disable")
+        return True
 
     def handle(self, frame: can.Message) -> bool:
         """Take one received frame; True when it completed the TPDOs of a SYNC (new status)."""
@@ -621,8 +648,6 @@ class MotorDriver:
             self.counters["fault_resets"] += 1
             self._reset_armed, self._reset_edges = False, 0
             self._event(INFO, "drive fault reset")
-        if new is State.QUICK_STOP_ACTIVE:
-            self._quick_stop_since = now
 
     def _request_error_code(self) -> None:
         if self.phase is Phase.RUNNING and not self.sdo.busy:
@@ -674,13 +699,9 @@ class MotorDriver:
             if state is State.QUICK_STOP_ACTIVE:
                 return Command.DISABLE_VOLTAGE          # to SWITCH ON DISABLED, then up again
             return Command.SWITCH_ON_AND_ENABLE         # READY, REFRESH, MEASURE INIT, SWITCHED ON, ENABLED
-        if self._quick_stop and self._enable_allowed(now):
-            if state is State.OPERATION_ENABLED:
-                return Command.QUICK_STOP
-            if state is State.QUICK_STOP_ACTIVE:
-                since = self._quick_stop_since if self._quick_stop_since is not None else now
-                if now - since < self.settings.quick_stop_time:
-                    return Command.QUICK_STOP
+        if (self._quick_stop and self._enable_allowed(now) and state is State.OPERATION_ENABLED
+                and now - self._watchdog_at < self.settings.quick_stop_time):
+            return Command.QUICK_STOP                   # until the drive reports it, briefly
         return Command.DISABLE_VOLTAGE
 
     def _fault_reset_word(self, now: float) -> int:
