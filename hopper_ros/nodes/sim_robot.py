@@ -120,6 +120,7 @@ class SimRobotNode(Node):
         self.robot.throw(apex_height, forward_speed, leg_angle, lead_time=self.throw_lead, hold=hold)
         self.series = ExperimentSeries(self.robot, seed=config.seed) if experiments else None
         self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._udp.bind(("127.0.0.1", 0))            # a sender on loopback only, not on 0.0.0.0
         self._udp_address = ("127.0.0.1", int(udp_port))
         self._force_msg = GroundReactionForce()
         self._force_msg.header.frame_id = "force_plate"
