@@ -55,6 +55,18 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _info(args) -> int:
+    from hopper_ros.cli.errors import run_tool
+
+    return run_tool("bag info", [args.bag], lambda: _info_main(args))
+
+
+def _recover(args) -> int:
+    from hopper_ros.cli.errors import run_tool
+
+    return run_tool("bag recover", [args.bag], lambda: _recover_main(args))
+
+
+def _info_main(args) -> int:
     from hopper_ros.recording.bag import BagError, bag_info
 
     try:
@@ -65,7 +77,7 @@ def _info(args) -> int:
     return 0
 
 
-def _recover(args) -> int:
+def _recover_main(args) -> int:
     from hopper_ros.recording.bag import BagError, recover_bag
 
     try:

@@ -16,6 +16,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from hopper_ros.cli.errors import run_tool
+
+    return run_tool("diagnose", [args.recording, args.model, args.settings], lambda: _main(args))
+
+
+def _main(args: argparse.Namespace) -> int:
     from hopper_ros.diagnosis import DiagnosisError, diagnose_file
     from hopper_ros.identification.recordings import RecordingError
 

@@ -32,6 +32,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from hopper_ros.cli.errors import run_tool
+
+    return run_tool("identify", [args.recording, args.config], lambda: _main(args))
+
+
+def _main(args: argparse.Namespace) -> int:
     from hopper_ros.identification.crossval import format_error_table, format_parameter_table
     from hopper_ros.identification.pipeline import identify
     from hopper_ros.identification.recordings import RecordingError

@@ -32,6 +32,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from hopper_ros.cli.errors import run_tool
+
+    return run_tool("report", [args.recording or args.output, args.config], lambda: _main(args))
+
+
+def _main(args: argparse.Namespace) -> int:
     from hopper_ros.config import load_yaml
     from hopper_ros.identification.grf import simulate_profiles
     from hopper_ros.identification.pipeline import identify
