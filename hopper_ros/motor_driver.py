@@ -62,7 +62,6 @@ from hopper_ros.canbus.master import (
     nmt_state_name,
     sync_frame,
 )
-from hopper_ros.config import load_yaml
 from hopper_ros.hardware.encoders import Encoder
 from hopper_ros.hardware.motor import RPM_PER_RAD_S, HipMotor
 
@@ -140,36 +139,29 @@ class DriverSettings:
     shutdown_timeout: float = 0.5       # [s] bound on shutdown()
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"motor_driver: {f.name} must be a finite number >= 0, got {value!r}")
-        for name in ("sync_period", "command_timeout", "heartbeat_timeout", "sdo_timeout", "shutdown_timeout"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"motor_driver: {name} must be positive")
-        if not 1 <= self.master_node_id <= 127:
-            raise ValueError(f"motor_driver: master_node_id must be 1..127, got {self.master_node_id}")
-        if self.drive_consumer_time and not 0 < self.master_heartbeat_period < self.drive_consumer_time:
-            raise ValueError("motor_driver: master_heartbeat_period must be positive and below drive_consumer_time")
+        from hopper_ros.config_schemas import MOTOR_DRIVER_SECTION
+        from hopper_ros.schema import validate
+
+        validate(MOTOR_DRIVER_SECTION, {f.name: getattr(self, f.name) for f in fields(self)}, "motor_driver")
 
     @classmethod
-    def from_mapping(cls, section: Mapping[str, Any], **overrides: Any) -> "DriverSettings":
+    def from_mapping(cls, section: Mapping[str, Any], source: str = "motor_driver", **overrides: Any) -> "DriverSettings":
+        """Settings from a `motor_driver` section (validated by its schema) and overrides (node parameters)."""
+        from hopper_ros.config_schemas import MOTOR_DRIVER_SECTION
+        from hopper_ros.schema import validate
+
+        merged = {**dict(section), **{k: v for k, v in overrides.items() if v is not None}}
+        checked = validate(MOTOR_DRIVER_SECTION, merged, source)
         known = {f.name for f in fields(cls)}
-        unknown = set(section) - known - NODE_KEYS
-        if unknown:
-            raise ValueError(f"motor_driver: unknown setting(s) {', '.join(sorted(unknown))}")
-        values = {k: v for k, v in section.items() if k in known}
-        values.update({k: v for k, v in overrides.items() if v is not None})
-        return cls(**values)
+        return cls(**{k: v for k, v in checked.items() if k in known})
 
 
 def load_section(name: str = "motor_driver.yaml") -> dict[str, Any]:
-    """The `motor_driver` section of a config file (driver settings plus the NODE_KEYS)."""
-    data = load_yaml(name) or {}
-    section = data.get("motor_driver") if isinstance(data, Mapping) else None
-    if not isinstance(section, Mapping):
-        raise ValueError(f"{name}: expected a mapping `motor_driver:`")
-    return dict(section)
+    """The `motor_driver` section of a config file (driver settings plus the NODE_KEYS), validated."""
+    from hopper_ros.config_schemas import MOTOR_DRIVER
+    from hopper_ros.schema import load_config
+
+    return dict(load_config(name, MOTOR_DRIVER)["motor_driver"])
 
 
 CONNECT_TIMEOUT = 30.0   # [s] for a socketcand server to accept (the simulated robot may start later)
@@ -919,7 +911,7 @@ class MotorDriver:
 
 
 def load_hardware(name: str = "hardware.yaml") -> Mapping[str, Any]:
-    data = load_yaml(name)
-    if not isinstance(data, Mapping):
-        raise ValueError(f"{name}: expected a mapping")
-    return data
+    """config/hardware.yaml (or a variant), validated by its schema (hopper_ros.config_schemas)."""
+    from hopper_ros.config_schemas import load_hardware as load
+
+    return load(name)

@@ -526,7 +526,7 @@ def test_configuration_and_bus_choice():
     settings = DriverSettings.from_mapping(section)
     assert settings.command_timeout == 0.01 and settings.sync_period == 0.001
     assert DriverSettings.from_mapping(section, command_timeout=0.005).command_timeout == 0.005
-    with pytest.raises(ValueError, match="unknown setting"):
+    with pytest.raises(ValueError, match="comand_timeout: unknown key"):
         DriverSettings.from_mapping({"comand_timeout": 0.02})
     with pytest.raises(ValueError, match="command_timeout"):
         DriverSettings(command_timeout=-1.0)

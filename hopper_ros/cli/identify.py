@@ -43,6 +43,7 @@ def _main(args: argparse.Namespace) -> int:
     from hopper_ros.identification.recordings import RecordingError
     from hopper_ros.identification.settings import load_settings
     from hopper_ros.recording.bag import BagError
+    from hopper_ros.schema import ConfigError
 
     try:
         settings = load_settings(args.config)
@@ -60,7 +61,7 @@ def _main(args: argparse.Namespace) -> int:
                           max_strides=args.max_strides)
     except (RecordingError, BagError, ValueError, FileNotFoundError) as exc:
         print(f"hopper identify: error: {exc}", file=sys.stderr)
-        return 2
+        return 1 if isinstance(exc, ConfigError) else 2
     print(f"{len(result.strides)} strides from {result.recording.source} "
           f"({len(result.strides.rejected)} rejected); phases "
           f"{'labelled' if result.strides.labelled else 'detected'}")

@@ -67,18 +67,14 @@ class DeadbeatSettings:
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "deadbeat settings") -> "DeadbeatSettings":
-        known = cls.__dataclass_fields__
-        unknown = sorted(set(values) - set(known))
-        if unknown:
-            raise ValueError(f"{source}: unknown setting(s) {unknown}; known: {sorted(known)}")
-        settings = cls(**values)
-        if settings.predictor not in PREDICTORS:
-            raise ValueError(f"{source}: predictor {settings.predictor!r} is not one of {PREDICTORS}")
-        if settings.angle_points < 3 or settings.angle_span <= 0 or settings.torque_step <= 0:
-            raise ValueError(f"{source}: angle_points >= 3, angle_span > 0 and torque_step > 0 needed")
-        if not 0.0 <= settings.adaptation_gain <= 1.0:
-            raise ValueError(f"{source}: adaptation_gain must be in [0, 1], got {settings.adaptation_gain}")
-        return settings
+        """Settings from a `deadbeat` section (missing keys: the defaults), checked by the schema of
+        control.yaml (hopper_ros.config_schemas.CONTROL): types, ranges with units, min < max."""
+        from hopper_ros.config_schemas import CONTROL
+        from hopper_ros.schema import Section, validate
+
+        defaults = {name: getattr(cls, name) for name in cls.__dataclass_fields__}
+        section = Section({"deadbeat": CONTROL.fields["deadbeat"]})
+        return cls(**validate(section, {"deadbeat": {**defaults, **dict(values)}}, source)["deadbeat"])
 
 
 @dataclass

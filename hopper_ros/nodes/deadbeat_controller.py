@@ -44,14 +44,15 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from hopper_ros.config import load_yaml
+from hopper_ros.config import config_path
+from hopper_ros.config_schemas import CONTROL, load_model
+from hopper_ros.schema import load_config
 from hopper_ros.control.closed_loop import decide_at_apex
 from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings, StrideDecision
 from hopper_ros.control.stride_machine import Phase, StrideMachine, StridePlan
 from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, NodeDiagnostics, StrideCommand
 from hopper_ros.nodes.common import run_node
 from hopper_ros.physics.flight import touchdown_time
-from hopper_ros.physics.params import load_params
 from hopper_ros.physics.predictors import predict_stride
 from hopper_ros.sensing.messages import to_time
 
@@ -77,7 +78,7 @@ class DeadbeatControllerNode(Node):
         adaptation = param("adaptation", "", "override control.yaml: true or false")
         self._last_sent = -math.inf
         self._touchdown_stamp = None
-        config = load_yaml(config_file)
+        config = load_config(config_file, CONTROL)
         settings = dict(config.get("deadbeat", {}))
         stride = config.get("stride", {})
         self.keep_alive = param("keep_alive", float(stride.get("keep_alive", 0.003)),
@@ -90,8 +91,8 @@ class DeadbeatControllerNode(Node):
             if adaptation not in ("true", "false"):
                 raise ValueError(f"adaptation must be true or false, got {adaptation!r}")
             settings["adaptation"] = adaptation == "true"
-        self.params = load_params(model_file)
-        self.controller = DeadbeatController(self.params, DeadbeatSettings.from_mapping(settings, config_file))
+        self.params = load_model(model_file)
+        self.controller = DeadbeatController(self.params, DeadbeatSettings.from_mapping(settings, str(config_path(config_file))))
         self.machine = StrideMachine()
         if self.experiment == "single_stride":
             if not (math.isfinite(tau_0) and math.isfinite(touchdown_angle)):

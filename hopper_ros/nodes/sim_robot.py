@@ -41,7 +41,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from builtin_interfaces.msg import Time as TimeMsg
 
-from hopper_ros.config import load_yaml
+from hopper_ros.config_schemas import load_hardware
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.msg import ApexState, BodyState, GaitEvent, GroundReactionForce, NodeDiagnostics
 from hopper_ros.nodes.common import run_node
@@ -86,7 +86,7 @@ class SimRobotNode(Node):
         hardware_file = param("hardware_file", "hardware.yaml", "hardware configuration (YAML)")
         self.mode = param("mode", "realtime", "realtime or lockstep")
         can_setting = param("can", "hub", "hub, virtual:CHANNEL or none")
-        hardware = load_yaml(hardware_file)
+        hardware = load_hardware(hardware_file)
         can_port = param("can_port", int(hardware["can"]["port"]), "TCP port of the CAN hub on 127.0.0.1")
         udp_host = param("udp_host", str(hardware["microcontroller"]["host"]), "where the encoder packets go")
         udp_port = param("udp_port", int(hardware["microcontroller"]["port"]), "UDP port of the encoder packets")

@@ -167,4 +167,10 @@ class SimConfig:
 
 
 def load_sim_config(name: str | os.PathLike = DEFAULT_FILE) -> SimConfig:
-    return SimConfig.from_dict(load_yaml(name), source=str(name))
+    """The file checked by its schema (hopper_ros.config_schemas.SIM: everything but sim.effects,
+    which `from_dict` checks), then built."""
+    from hopper_ros.config import config_path
+    from hopper_ros.config_schemas import SIM
+    from hopper_ros.schema import load_config
+
+    return SimConfig.from_dict(load_config(name, SIM), source=str(config_path(name)))
