@@ -352,6 +352,11 @@ class SocketcandServer:
             if not data:
                 self._kill(client, "disconnected")
                 return
+            try:    # acknowledge at once: a client without TCP_NODELAY (python-can's default) holds its
+                    # next small frame until our ACK (Nagle), and Linux delays ACKs up to 40 ms
+                client.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_QUICKACK, 1)
+            except OSError:
+                pass
             client.buffer += data.decode("ascii", errors="replace")
             self._parse(client)
             if client.dead or len(data) < _RECV_SIZE:
@@ -373,7 +378,7 @@ class SocketcandServer:
                 buf = buf[start:]
                 if len(buf) > MAX_COMMAND_LENGTH:
                     self.counters.garbage_commands += 1
-                    log.warning("socketcand hub: client %s sent an endless command; closing it", client.peer)
+                    log.debug("socketcand hub: client %s sent an endless command; closing it", client.peer)
                     self._kill(client, "endless command")
                     buf = ""
                 break

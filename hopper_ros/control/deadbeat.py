@@ -152,7 +152,13 @@ class DeadbeatController:
         aim_height = target_height - bias[0] - self._defect[0]
         aim_speed = target_speed - bias[1] - self._defect[1]
         angle = self._warm_angle if self._warm_angle is not None else self.neutral_angle(forward_speed)
+        warm_jacobian = self._jacobian
         solved = self._newton(apex_height, forward_speed, aim_height, aim_speed, angle, self._warm_torque)
+        if (solved is None or solved[-1] == "height out of reach") and warm_jacobian is not None:
+            # the last stride's Jacobian (Broyden-updated, then moved by stage 2's refinement) led
+            # Newton astray: once more with a fresh finite-difference Jacobian at the warm start
+            self._jacobian = None
+            solved = self._newton(apex_height, forward_speed, aim_height, aim_speed, angle, self._warm_torque)
         result = self._decision(stride_index, solved, target_height, target_speed, bias, forward_speed)
         if result.feasible:   # what the model (not the AAS) predicts is only known after stage 2
             result.predicted_apex_height, result.predicted_forward_speed = target_height, target_speed
