@@ -38,7 +38,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from hopper_ros.physics.params import ModelParams
-from hopper_ros.physics.predictors import PREDICTORS, predict_stride
+from hopper_ros.physics.predictors import predict_stride
 
 NEWTON_ITERATIONS = 6
 HEIGHT_TOLERANCE = 5e-4     # [m] stage 1 stops when the AAS apex is this close ...

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from hopper_ros.physics.params import ModelParams, load_params
+from hopper_ros.physics.params import ModelParams
 
 from .bridge import BridgeSample, EncoderBridge
 from .config import SensingConfig, load_sensing_config

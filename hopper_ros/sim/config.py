@@ -14,7 +14,6 @@ import os
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from hopper_ros.config import load_yaml
 from hopper_ros.physics.params import ModelParams
 
 DEFAULT_FILE = "sim.yaml"
