@@ -4,16 +4,16 @@ units, unknown keys refused). No ROS import.
 | file | schema | read by |
 |---|---|---|
 | hardware.yaml (and variants) | HARDWARE | sim_robot, motor_driver, encoder_bridge, state_estimator, collect, report |
-| sim.yaml | SIM (everything but `sim.effects`, which hopper_ros.sim.config checks) | sim_robot, collect, report |
+| sim.yaml | SIM (`sim.physics`: the eight model parameters; `sim.effects` is checked by hopper_ros.sim.config against the effect library) | sim_robot, collect, report |
 | sensing.yaml | SENSING | encoder_bridge, state_estimator, event_detector |
-| model.yaml (and identified models) | MODEL | deadbeat_controller, stride_predictor, event_detector, diagnose |
+| model.yaml (and identified models) | MODEL (`model:`; an identified model's `effects:` is checked by hopper_ros.physics.params.load_model against the effect library) | deadbeat_controller, stride_predictor, event_detector, diagnose |
 | control.yaml | CONTROL | deadbeat_controller |
 | motor_driver.yaml (and variants) | MOTOR_DRIVER | motor_driver |
-| identification.yaml | IDENTIFICATION | identify, report |
+| identification.yaml | IDENTIFICATION (with `effects:`, library names checked against `fitted`, and `lanes:`) | identify, report |
 | setpoints/*.yaml | SCHEDULE | setpoint_scheduler |
 
-diagnosis.yaml and the launch files are not covered yet: `load_config(name, SCHEMA)` is the way
-to adopt them.
+diagnosis.yaml (read by hopper_ros.diagnosis.core.load_settings, which checks it itself) and the
+launch files are not covered yet: `load_config(name, SCHEMA)` is the way to adopt them.
 """
 
 from __future__ import annotations
@@ -95,7 +95,12 @@ MODEL_FIELDS = {
     "flight_damping_vertical": Number("1/s", ge=0),
     "rest_length": Number("m", gt=0),
 }
-MODEL = Section({"model": Section(MODEL_FIELDS)})
+MODEL = Section({
+    "model": Section(MODEL_FIELDS),
+    # an identified model's library effects {name: magnitude} (`hopper identify --effects`): names,
+    # numbers and which may be infinite are checked by hopper_ros.physics.params.load_model
+    "effects": Anything(default=None, doc="{effect library name: magnitude}, checked by physics.params.load_model"),
+})
 
 # ------------------------------------------------------------------------------------ sim.yaml
 
@@ -107,14 +112,9 @@ def _sensor(key: str, unit: str) -> Section:
 SIM = Section({"sim": Section({
     "period": Number("s", gt=0, le=0.1),
     "substeps": Number(ge=1, le=1000, integer=True),
-    "physics": Section({
-        "body_mass": Number("kg", gt=0),
-        "stiffness": Number("N/m", gt=0),
-        "damping": Number("N s/m", ge=0),
-        "rest_length": Number("m", gt=0),
-        "gravity": Number("m/s^2", gt=0),
-    }),
-    "effects": Anything(doc="checked by hopper_ros.sim.config (the effect library)"),
+    "physics": Section(MODEL_FIELDS, doc="the extended TD-SLIP model's parameters (ModelParams' fields)"),
+    "effects": Anything(doc="entries of the effect library, checked by hopper_ros.sim.config (library names, "
+                        "each one's parameter)"),
     "sensors": Section({
         "encoder_noise": _sensor("counts", "counts"),
         "current_noise": _sensor("current", "A"),
@@ -187,6 +187,8 @@ SENSING = Section({"sensing": Section({
 # ------------------------------------------------------------------------------------ control.yaml
 
 PREDICTORS = ("aas", "corrected", "exact")
+# identification's: the model library's predictors and "lanes" (the laws with library effects)
+IDENTIFICATION_PREDICTORS = PREDICTORS + ("lanes",)
 
 CONTROL = Section({
     "deadbeat": Section({
@@ -266,8 +268,22 @@ def _bounds_ordered(values: dict):
     return None
 
 
+def _effects_identifiable(values: dict):
+    """The effects are library physics entries, named once, none setting a parameter `fitted` fits."""
+    if not values.get("effects"):
+        return None
+    from hopper_ros.identification.lanesfit import check_effects
+
+    try:
+        check_effects(values["effects"], values.get("fitted", ()))
+    except ValueError as exc:
+        text = str(exc)
+        return "effects", text[len("effects: "):] if text.startswith("effects: ") else text
+    return None
+
+
 IDENTIFICATION = Section({"identification": Section({
-    "predictor": Text(choices=PREDICTORS, default="aas"),
+    "predictor": Text(choices=IDENTIFICATION_PREDICTORS, default="aas"),
     "folds": Number(ge=2, integer=True),
     "seed": Number(ge=0, integer=True, default=0),
     "fitted": Items(Text(choices=FITTABLE), min_items=1, unique=True),
@@ -286,6 +302,19 @@ IDENTIFICATION = Section({"identification": Section({
         "defect_tolerance": Number("log units", gt=0, default=None),
         "polish_evaluations": Number(ge=0, integer=True, default=None),
         "polish_step": Number("log units", gt=0, default=None),
+    }, default={}),
+    "effects": Items(Text(), unique=True, default=[],
+                     doc="library effects (hopper_ros/physics/effects.py) fitted with the model by the lanes predictor"),
+    "lanes": Section({
+        "step": Number("s", gt=0, le=0.002, default=None),
+        "duration_factor": Number(ge=1, default=None),
+        "fd_step": Number("log units or share of the search range", gt=0, lt=0.1, default=None),
+        "max_iterations": Number(ge=1, integer=True, default=None),
+        "initial_radius": Number("log units", gt=0, default=None),
+        "xtol": Number(gt=0, default=None),
+        "ftol": Number(gt=0, default=None),
+        "polish_iterations": Number(ge=0, integer=True, default=None),
+        "batch_lanes": Number("lanes", ge=1, integer=True, default=None),
     }, default={}),
     "failed_stride_error_pct": Number("%", ge=0, default=100.0),
     "extraction": Section({
@@ -310,7 +339,7 @@ IDENTIFICATION = Section({"identification": Section({
         "touchdown_angle_deg": Number("deg", gt=-90, lt=90, default=None),
         "tau_0": Number("N m", default=None),
     }, default={}),
-})})
+}, checks=(_effects_identifiable,))})
 
 # ------------------------------------------------------------------------------------ setpoint schedules
 
@@ -343,14 +372,16 @@ def load_hardware(name="hardware.yaml") -> dict:
 
 
 def load_model(name="model.yaml"):
-    """A model parameter file, validated, as ModelParams (hopper_ros.physics.params)."""
+    """A model parameter file, validated, as ModelParams (hopper_ros.physics.params). An identified
+    model's `effects:` are validated too (hopper_ros.physics.params.load_model, which returns them)
+    and left out here: the controller, the predictor and the detector use the model alone."""
     from hopper_ros.config import config_path
-    from hopper_ros.physics.params import load_params
+    from hopper_ros.physics.params import load_model as load_params_and_effects
     from hopper_ros.schema import ConfigError, load_config
 
     load_config(name, MODEL)
     try:
-        return load_params(config_path(name))
+        return load_params_and_effects(config_path(name))[0]
     except ValueError as exc:           # physical checks across parameters (damping ratio)
         text = str(exc)
         raise ConfigError(text if str(config_path(name)) in text else f"{config_path(name)}: model: {text}") from None

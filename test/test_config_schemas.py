@@ -110,6 +110,12 @@ CASES = [
     ("sim_robot:sim", "sim.sensors.encoder_noise.enabled", "yes", "must be true or false"),
     ("sim_robot:sim", "sim.force_plate", DELETE, "missing"),
     ("collect:sim", "sim.physics.body_mass", 0.0, "must be > 0 kg"),
+    ("sim_robot:sim", "sim.physics.toe_mass", -0.03, "must be >= 0 kg"),
+    ("collect:sim", "sim.physics.flight_damping_vertical", -0.2, "must be >= 0 1/s"),
+    ("collect:sim", "sim.physics.rest_length", 0.0, "must be > 0 m"),
+    ("sim_robot:sim", "sim.physics.gravity", DELETE, "missing"),
+    ("collect:sim", "sim.effects.leg_fiction", {"enabled": True, "F_c": 2.0}, "unknown effect 'leg_fiction'"),
+    ("sim_robot:sim", "sim.effects.leg_friction.F_c", -2.0, "must be a non-negative number [N]"),
     ("sim_robot:hardware", "boom.length", -1.65, "must be > 0 m"),
     ("sim_robot:hardware", "microcontroller.port", DELETE, "missing (required: an integer"),
     ("encoder_bridge:hardware", "microcontroller.port", "fifteen", "must be an integer (>= 1 and <= 65535), got 'fifteen'"),
@@ -135,9 +141,18 @@ CASES = [
     ("identify:config", "identification.bounds.stiffness", [5000.0, 500.0], "low < high"),
     ("report:config", "identification.predictor", "best", "must be one of"),
     ("report:config", "identification.nelder_mead.max_evaluations", 5, "must be >= 10"),
+    ("identify:config", "identification.effects", ["leg_fiction"], "unknown effect 'leg_fiction'"),
+    ("identify:config", "identification.effects", ["leg_stiffness"], "leg_stiffness sets stiffness"),
+    ("report:config", "identification.effects", "leg_friction", "must be a list"),
+    ("identify:config", "identification.lanes.step", 0.01, "must be <= 0.002 s"),
+    ("report:config", "identification.lanes.batch_lanes", 0, "must be >= 1 lanes"),
+    ("identify:config", "identification.lanes.max_iteration", 30, "unknown key"),
+    ("diagnose:model", "effects", {"leg_fiction": 1.0}, "effects.leg_fiction: unknown effect"),
+    ("stride_predictor:model", "effects", {"leg_friction": "strong"}, "effects.leg_friction must be a number"),
 ]
 # the key the error names: where the check lands (a cross-key check names the later key)
-NAMED_KEY = {"deadbeat.min_torque": "deadbeat.max_torque",
+NAMED_KEY = {"deadbeat.min_torque": "deadbeat.max_torque", "sim.effects.leg_fiction": "sim.effects",
+             "effects": "effects.leg_f",
              "sensing.detector.track_velocity_std": "sensing.detector.acquire_velocity_std",
              "motor_driver.command_timeout@0.0005": "motor_driver.command_timeout"}
 
@@ -167,6 +182,18 @@ def _run(case, tmp: Path) -> tuple:
     result = subprocess.run([sys.executable, "-m", "hopper_ros.cli", *args], capture_output=True, text=True,
                             timeout=120, env=env, cwd=folder)
     return case, bad, result
+
+
+def test_a_model_file_with_library_effects_passes_its_schema(tmp_path):
+    """An identified model with effects (`hopper identify --effects`): the nodes read its parameters."""
+    import math
+
+    from hopper_ros.config_schemas import load_model
+    from hopper_ros.physics.params import load_params, save_params
+
+    path = save_params(load_params(), tmp_path / "identified.yaml",
+                       effects={"leg_friction": 2.5, "torque_saturation": math.inf})
+    assert load_model(path) == load_params()
 
 
 def test_a_table_of_bad_config_files_across_every_node_and_tool(tmp_path):

@@ -88,7 +88,7 @@ def test_closed_loop_follows_the_fig_5_5_schedule(adaptation):
 
 
 def test_adaptation_removes_the_offset_of_physics_the_model_lacks():
-    sim = load_sim_config().with_effects(ground_compliance=True, touchdown_impact=True)
+    sim = load_sim_config().with_effects(ground_compliance=True, touchdown_loss_across=True)
     schedule = [(0.39, 2.0)] * 25
     plain = summarise(run_closed_loop(controller(adaptation=False), sim, HARDWARE, schedule))[0]
     adapted = summarise(run_closed_loop(controller(adaptation=True), sim, HARDWARE, schedule))[0]

@@ -250,7 +250,7 @@ def test_lockstep_collection_records_what_a_live_recording_holds(tmp_path):
         assert counts["/stride_command"] == kept
         assert counts["/sim/events"] == 5 * kept           # apex, touchdown, bottom, lift-off, apex
         assert counts["/body_measurement"] == counts["/force_plate"] == counts["/sim/truth"] > 300 * kept
-        assert BagReader(tmp_path / "bag").custom_data["hopper_ros.effects"] == "flight_damping,liftoff_collision,boom_gravity"
+        assert BagReader(tmp_path / "bag").custom_data["hopper_ros.effects"] == ""          # no effect: the robot is the model
     recording = load_bag(tmp_path / "bag")
     truth = recording.truth
     assert np.array_equal(truth["t"], recording.t)

@@ -10,15 +10,19 @@ import pytest
 from hopper_ros.config import load_yaml
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.hardware.encoders import BoomKinematics, CounterUnwrapper
+from hopper_ros.physics import effects as library
+from hopper_ros.physics import lanes, laws
 from hopper_ros.physics.evaluation import sample_thesis_strides
 from hopper_ros.physics.exact import simulate_stride
-from hopper_ros.sim.config import EFFECTS, MODEL_EFFECTS, load_sim_config
+from hopper_ros.sim.config import EFFECTS, SimConfig, load_sim_config
 from hopper_ros.sim.experiment import StrideExperiment, drive_hold
 from hopper_ros.sim.robot import SimRobot
 
 HARDWARE = load_yaml("hardware.yaml")
 BASE = load_sim_config()
-EXTRA_EFFECTS = [name for name in EFFECTS if name not in MODEL_EFFECTS]
+# the extended TD-SLIP model's own terms, each taken out of the physics
+WITHOUT_MODEL_TERMS = {"flight_damping": {"flight_damping_horizontal": 0.0, "flight_damping_vertical": 0.0},
+                       "toe_mass": {"toe_mass": 0.0}, "boom_gravity": {"gravity": 9.81}}
 
 
 def run_stride(config, apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration, hardware=HARDWARE):
@@ -47,9 +51,12 @@ def exact_at_realised_touchdown(params, experiment, apex_height, forward_speed, 
     return simulate_stride(params, apex_height, forward_speed, touchdown_angle, tau_0, ramp)
 
 
-@pytest.mark.parametrize("which", ["all_off", "model_effects"])
+@pytest.mark.parametrize("which", ["slip", "model"])
 def test_lockstep_matches_the_exact_return_map(which):
-    config = BASE.all_effects_off() if which == "all_off" else BASE.only_model_effects()
+    """No effect on: the simulated robot is the model (with its terms, or the plain SLIP without them)."""
+    config = BASE.all_effects_off()
+    if which == "slip":
+        config = config.with_physics(**{k: v for terms in WITHOUT_MODEL_TERMS.values() for k, v in terms.items()})
     params = config.model_params()
     counts = HARDWARE["encoders"]["motor"]
     count = 2.0 * math.pi / (counts["lines"] * counts["quadrature"] * counts["transmission"])
@@ -71,21 +78,42 @@ def test_lockstep_matches_the_exact_return_map(which):
     assert compared >= 8
 
 
-def test_model_effects_change_the_stride_as_the_model_says():
-    """Switching one of the model's effects off in the sim matches the model without it."""
+def test_model_terms_change_the_stride_as_the_model_says():
+    """Taking one of the model's terms out of the sim's physics matches the model without it."""
     stride = (0.38, 1.8, 0.30, 5.0, 0.11)
-    for effect in MODEL_EFFECTS:
-        config = BASE.only_model_effects().with_effects(**{effect: False})
+    for term, changes in WITHOUT_MODEL_TERMS.items():
+        config = BASE.all_effects_off().with_physics(**changes)
         experiment, _ = run_stride(config, *stride)
         exact = exact_at_realised_touchdown(config.model_params(), experiment, 0.38, 1.8, 5.0, 0.11)
-        assert experiment.next_apex.z == pytest.approx(exact.next_apex.z, rel=1e-6), effect
+        assert experiment.next_apex.z == pytest.approx(exact.next_apex.z, rel=1e-6), term
 
 
-@pytest.mark.parametrize("effect", EXTRA_EFFECTS)
-def test_each_extra_effect_changes_the_stride(effect):
-    stride = (0.40, 2.0, 0.30, 6.0, 0.10)
-    reference, _ = run_stride(BASE.only_model_effects(), *stride)
-    changed, samples = run_stride(BASE.only_model_effects().with_effects(**{effect: True}), *stride)
+def test_the_sim_config_lists_every_physics_entry_of_the_library():
+    assert list(EFFECTS) == [effect.name for effect in library.LIBRARY]
+    assert set(BASE.effects) == set(EFFECTS)
+    assert not BASE.enabled_effects()                      # all off: the robot is the model
+    assert BASE.coefficients() == library.apply(
+        laws.Coefficients.from_model(BASE.model_params()), {})[0]
+
+
+LIBRARY_STRIDE = (0.40, 2.0, 0.30, 6.0, 0.10)
+
+
+@pytest.fixture(scope="module")
+def library_strides():
+    """One stride with no effect, then one per physics entry of the library enabled through the config."""
+    runs = {"none": (BASE, *run_stride(BASE, *LIBRARY_STRIDE))}
+    for name in EFFECTS:
+        config = BASE.with_effects(**{name: True})
+        runs[name] = (config, *run_stride(config, *LIBRARY_STRIDE))
+    return runs
+
+
+@pytest.mark.parametrize("effect", list(EFFECTS))
+def test_each_library_effect_changes_the_stride(library_strides, effect):
+    _, reference, _ = library_strides["none"]
+    config, changed, samples = library_strides[effect]
+    assert config.enabled_effects() == {effect: BASE.effects[effect][EFFECTS[effect]]}
     assert not changed.fell
     apex, before = changed.next_apex, reference.next_apex
     change = max(abs(apex.z - before.z) / before.z, abs(apex.ydot - before.ydot) / before.ydot)
@@ -93,21 +121,44 @@ def test_each_extra_effect_changes_the_stride(effect):
 
     stance = [s.truth for s in samples if s.truth.in_contact]
     touchdown = changed.event("touchdown").t
-    settings = BASE.effects[effect]
+    magnitude = config.value(effect)
     if effect == "torque_saturation":
-        assert max(abs(s.hip_torque) for s in stance) == pytest.approx(settings["max_torque"], rel=1e-9)
+        assert max(abs(s.hip_torque) for s in stance) == pytest.approx(magnitude, rel=1e-9)
     if effect == "actuation_delay":
-        early = [s for s in stance if s.t < touchdown + settings["delay"] - 1e-4]
-        late = [s for s in stance if s.t > touchdown + settings["delay"] + 1e-4]
+        early = [s for s in stance if s.t < touchdown + magnitude - 1e-4]
+        late = [s for s in stance if s.t > touchdown + magnitude + 1e-4]
         assert early and all(s.hip_torque == 0.0 for s in early)
-        assert abs(late[0].hip_torque) > 0.8 * stride[3]
-    if effect == "touchdown_impact":
+        assert abs(late[0].hip_torque) > 0.8 * LIBRARY_STRIDE[3]
+    if effect == "actuator_lag":     # the applied torque follows the ramp's step at touchdown with T_l
+        first = stance[0]
+        assert abs(first.hip_torque) < 0.5 * LIBRARY_STRIDE[3]
+        assert max(abs(s.hip_torque) for s in stance) < LIBRARY_STRIDE[3]
+    if effect == "touchdown_loss_across":
         before_td = reference.event("touchdown")
         assert before_td.ydot != pytest.approx(changed.event("touchdown").ydot, rel=1e-3)
 
 
+def test_the_plant_and_the_lanes_integrator_are_one_model(library_strides):
+    """The same stride, effect by effect, by the sim's plant and by `physics.lanes` with the config's
+    coefficients (at the touchdown angle the drive realised): the same next apex, to the lanes'
+    coarser event location."""
+    names = list(library_strides)
+    coefficients = lanes.stack([library_strides[n][0].coefficients() for n in names], 1)
+    realised = np.array([library_strides[n][1].event("touchdown").leg_angle for n in names])
+    count = len(names)
+    apex_height, speed, _, tau_0, ramp = LIBRARY_STRIDE
+    result = lanes.simulate_lanes(coefficients, np.full(count, apex_height), np.full(count, speed), realised,
+                                  np.full(count, tau_0), np.full(count, ramp), duration=0.7)
+    assert not result.fell.any()
+    for i, name in enumerate(names):
+        apex = library_strides[name][1].next_apex
+        assert apex.z == pytest.approx(result.next_apex_height[i], rel=1e-3), name
+        assert apex.ydot == pytest.approx(result.next_forward_speed[i], rel=3e-3), name
+        assert apex.t == pytest.approx(result.stride_time[i], abs=2e-3), name
+
+
 def test_ground_compliance_lets_the_toe_sink_by_force_over_stiffness():
-    config = BASE.only_model_effects().with_effects(ground_compliance={"stiffness": 30000.0, "damping": 200.0})
+    config = BASE.with_effects(ground_compliance={"k_g": 30000.0})
     robot = SimRobot(config, HARDWARE)
     robot.throw(0.40, 1.5, 0.2)
     experiment = StrideExperiment(0.0, 0.2, 0.1, drive_hold(HARDWARE), config.pre_touchdown_height)
@@ -118,9 +169,9 @@ def test_ground_compliance_lets_the_toe_sink_by_force_over_stiffness():
         if sample.truth.in_contact:
             depths.append(robot.plant.state[6])
             forces.append(sample.force.vertical)
-    peak = int(np.argmax(forces))
-    # at peak force the damper is nearly idle: depth ~ F / k_g
-    assert depths[peak] == pytest.approx(forces[peak] / 30000.0, rel=0.1)
+    deepest = int(np.argmax(depths))
+    # k_g depth + d_g depth' = F: at the deepest point the damper is idle, depth = F / k_g
+    assert depths[deepest] == pytest.approx(forces[deepest] / 30000.0, rel=0.02)
     assert max(depths) > 1e-3
 
 
@@ -128,7 +179,7 @@ def test_leg_friction_dissipates_energy():
     stride = (0.40, 1.6, 0.25, 0.0, 0.1)
     config = BASE.all_effects_off()
     plain, _ = run_stride(config, *stride)
-    rubbing, _ = run_stride(config.with_effects(leg_friction={"force": 4.0}), *stride)
+    rubbing, _ = run_stride(config.with_effects(leg_friction={"F_c": 4.0}), *stride)
     m, g = config.physics["body_mass"], config.gravity
 
     def energy(event):
@@ -140,7 +191,7 @@ def test_leg_friction_dissipates_energy():
 
 
 def test_force_plate_impulse_equals_momentum_change():
-    config = BASE.only_model_effects()
+    config = BASE.all_effects_off()
     experiment, samples = run_stride(config, 0.38, 1.8, 0.3, 5.0, 0.11)
     touchdown, liftoff = experiment.event("touchdown"), experiment.event("liftoff")
     period = config.period
@@ -164,7 +215,7 @@ def test_packets_decode_to_the_true_positions_across_counter_wrap():
     encoders = {name: dict(section) for name, section in HARDWARE["encoders"].items()}
     encoders["azimuth"]["offset_counts"] = 2 ** 31 - 3000   # the register wraps within the stride
     hardware["encoders"] = encoders
-    config = BASE.only_model_effects()
+    config = BASE.all_effects_off()
     experiment, samples = run_stride(config, 0.38, 2.0, 0.3, 5.0, 0.11, hardware=hardware)
     kinematics = BoomKinematics.from_config(hardware)
     unwrappers = [CounterUnwrapper() for _ in range(3)]
@@ -211,8 +262,25 @@ def test_sensor_noise_is_seeded_and_switchable():
 def test_bad_sim_config_names_the_problem():
     with pytest.raises(ValueError, match="unknown effect 'magic'"):
         BASE.with_effects(magic=True)
-    with pytest.raises(ValueError, match="leg_friction.force must be a non-negative number"):
-        BASE.with_effects(leg_friction={"force": -1.0})
+    with pytest.raises(ValueError, match="leg_friction.F_c must be a non-negative number"):
+        BASE.with_effects(leg_friction={"F_c": -1.0})
+    data = load_yaml("sim.yaml")
+    old_style = {**data["sim"], "effects": {"leg_friction": {"enabled": False, "force": 2.0}}}
+    with pytest.raises(ValueError, match=r"my\.yaml: sim\.effects\.leg_friction: unknown key\(s\) \['force'\]"):
+        SimConfig.from_dict({"sim": old_style}, source="my.yaml")
+    with pytest.raises(ValueError, match=r"my\.yaml: sim\.effects: unknown effect 'boom_gravity'"):
+        SimConfig.from_dict({"sim": {**data["sim"], "effects": {"boom_gravity": {"enabled": True}}}}, source="my.yaml")
+    with pytest.raises(ValueError, match="sensor fault"):
+        BASE.with_effects(z_delay={"z_delay": 0.002})
+    with pytest.raises(ValueError, match=r"my\.yaml: sim\.physics: unknown parameter"):
+        SimConfig.from_dict({"sim": {**data["sim"], "physics": {**data["sim"]["physics"], "mass": 2.0}}},
+                            source="my.yaml")
+    # a library entry the file does not list can be given with its magnitude
+    config = SimConfig.from_dict({"sim": {**data["sim"], "effects": {}}}, source="my.yaml")
+    assert not config.enabled("quadratic_drag")
+    with pytest.raises(ValueError, match="'quadratic_drag' has no magnitude"):
+        config.with_effects(quadratic_drag=True)
+    assert config.with_effects(quadratic_drag={"c": 0.2}).coefficients().quadratic_drag == 0.2
     with pytest.raises(ValueError, match="toe"):
         SimRobot(BASE, HARDWARE).throw(0.1, 1.0, 0.3)
     assert math.isfinite(BASE.gravity)

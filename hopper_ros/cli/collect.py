@@ -1,6 +1,6 @@
 """`hopper collect`: section 4.1's single-stride experiments on the simulated robot, recorded.
 
-  hopper collect (-n N | --strides N) -o DIR [--noise] [--effects a,b] [--torque ramp|constant|none]
+  hopper collect (-n N | --strides N) -o DIR [--noise] [--effects a,b=VALUE] [--torque ramp|constant|none]
                  [--seed S] [--csv FILE [--csv-phase]]
 
 Runs in lockstep in this process (SimRobot + the experiment, no ROS graph, as fast as it goes)
@@ -23,8 +23,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     count.add_argument("--strides", type=int, metavar="N", help="run experiments until N strides are kept")
     parser.add_argument("-o", "--output", required=True, metavar="DIR", help="new bag folder")
     parser.add_argument("--noise", action="store_true", help="switch on every sensor noise of config/sim.yaml")
-    parser.add_argument("--effects", default="", metavar="A,B",
-                        help="extra effects to switch on (config/sim.yaml), e.g. leg_friction,actuation_delay")
+    parser.add_argument("--effects", default="", metavar="A,B=VALUE",
+                        help="effects of the library (hopper_ros/physics/effects.py) to switch on, with "
+                             "config/sim.yaml's magnitude or NAME=VALUE (the parameter's unit), "
+                             "e.g. leg_friction,actuation_delay=0.006")
     parser.add_argument("--no-effects", default="", metavar="A,B", help="effects to switch off")
     parser.add_argument("--torque", choices=("ramp", "constant", "none"), default="ramp", help="stance torque profile")
     parser.add_argument("--seed", type=int, default=0, help="seed of the drawn initial conditions and inputs")
@@ -36,6 +38,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _names(text: str) -> list[str]:
     return [name.strip() for name in text.split(",") if name.strip()]
+
+
+def _switches(on: str, off: str) -> dict:
+    """`--effects a,b=VALUE` and `--no-effects c` as `SimConfig.with_effects` arguments."""
+    from hopper_ros.sim.config import EFFECTS
+
+    switches: dict = {}
+    for item in _names(on):
+        name, _, value = (part.strip() for part in item.partition("="))
+        if not value:
+            switches[name] = True
+            continue
+        try:
+            magnitude = float(value)
+        except ValueError:
+            raise ValueError(f"--effects {item}: {value!r} is not a number") from None
+        switches[name] = {EFFECTS[name]: magnitude} if name in EFFECTS else True    # unknown: with_effects says so
+    return switches | {name: False for name in _names(off)}
 
 
 def main(args: argparse.Namespace) -> int:
@@ -50,8 +70,7 @@ def main(args: argparse.Namespace) -> int:
         settings = CollectionSettings(experiments=args.experiments, strides=args.strides, seed=args.seed,
                                       torque_profile=args.torque)
         config = load_sim_config(args.sim)
-        switches = {name: True for name in _names(args.effects)} | {name: False for name in _names(args.no_effects)}
-        config = config.with_effects(**switches)
+        config = config.with_effects(**_switches(args.effects, args.no_effects))
         if args.noise:
             config = config.with_sensors(**{name: True for name in SENSORS})
         hardware = load_hardware(args.hardware)

@@ -1,4 +1,4 @@
-"""`hopper diagnose RECORDING [--model FILE.yaml] [-o DIR]`: the mismatch tool (docs/diagnosis.md)."""
+"""`hopper diagnose RECORDING [--model FILE.yaml] [-o DIR] [--json FILE]`: the mismatch tool (docs/diagnosis.md)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", default="model.yaml", help="model parameters (config/ name or path)")
     parser.add_argument("--settings", default="diagnosis.yaml", help="candidates and statistics (config/ name or path)")
     parser.add_argument("-o", "--output", default=None, metavar="DIR", help="write diagnosis.md and diagnosis.png here")
+    parser.add_argument("--json", default=None, metavar="FILE", help="write the verdict and the location as JSON")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -30,19 +31,20 @@ def _main(args: argparse.Namespace) -> int:
 
     try:
         load_model(args.model)                          # its schema first: one line naming file and key
-        result = diagnose_file(args.recording, args.model, args.output, args.settings)
+        result = diagnose_file(args.recording, args.model, args.output, args.settings, args.json)
     except (DiagnosisError, RecordingError, ValueError, FileNotFoundError, KeyError) as exc:
         print(f"hopper diagnose: error: {exc}", file=sys.stderr)
         return 1 if isinstance(exc, ConfigError) else 2
-    loc = result["locate"]
+    from hopper_ros.diagnosis.core import location_line
+
     print(f"{len(result['data'].strides)} strides, {result['wall_time']:.1f} s")
-    print(f"mismatch largest in {loc['where'][1]} during {loc['where'][0]}: {loc['ratio']:.1f} x noise")
+    print(location_line(result["location"], result["settings"].locate_threshold))
     print(result["verdict"])
-    for line in result["sparse"]:
-        print("fall-back:", line)
     b, a = result["before"], result["after"]
     print(f"held-out E_p {b['E_p']:.3f} -> {a['E_p']:.3f} %, E_v {b['E_v']:.3f} -> {a['E_v']:.3f} %, "
           f"E_t {b['E_t']:.3f} -> {a['E_t']:.3f} %")
     if args.output:
         print(f"report: {result['report']}")
+    if args.json:
+        print(f"json: {result['json']}")
     return 0

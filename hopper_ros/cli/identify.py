@@ -1,12 +1,17 @@
 """`hopper identify RECORDING`: parameter identification with k-fold cross-validation (section 4.2).
 
-  hopper identify RECORDING [--predictor aas|corrected|exact ...] [--folds K] [--fit a,b,...]
-                  [--config FILE] [-o DIR] [--max-strides N] [--no-progress]
+  hopper identify RECORDING [--predictor aas|corrected|exact|lanes ...] [--effects a,b] [--folds K]
+                  [--fit a,b,...] [--config FILE] [-o DIR] [--max-strides N] [--no-progress]
 
 RECORDING is a bag of our recorder (or `hopper collect`) or a CSV `t,y,z,theta,tau[,phase]`.
 Prints Table 4.1 and Table 4.2 per predictor, the AAS's bias against the exact model when both
 ran, and what the strides can identify; with -o also a report (markdown, PNG) and the
 identified parameters as a model file.
+
+--effects names library effects (`physics.effects`, e.g. leg_friction,torque_gain) fitted together
+with the model parameters by the "lanes" predictor (the laws with the effects, `physics.lanes`);
+it implies `-p lanes` (other -p predictors still run, without the effects). The model file then
+carries them: `model: {...}` plus `effects: {name: magnitude}` (`physics.params.load_model`).
 """
 
 from __future__ import annotations
@@ -19,8 +24,11 @@ HELP = "identify the model parameters from a recording (Nelder-Mead on (4.4), k-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", help="bag folder, .mcap file or CSV (t,y,z,theta,tau[,phase])")
-    parser.add_argument("-p", "--predictor", action="append", choices=("aas", "corrected", "exact"),
-                        help="predictor to identify with; repeat for several (default: config's, the AAS)")
+    parser.add_argument("-p", "--predictor", action="append", choices=("aas", "corrected", "exact", "lanes"),
+                        help="predictor to identify with; repeat for several (default: config's, the AAS; "
+                        "lanes with --effects)")
+    parser.add_argument("--effects", metavar="A,B", help="library effects to fit with the model (implies -p lanes), "
+                        "e.g. leg_friction,torque_gain")
     parser.add_argument("--folds", type=int, help="folds of the cross-validation (default: config's, 10)")
     parser.add_argument("--fit", metavar="A,B", help="parameters to fit (default: config's), e.g. "
                         "gravity,stiffness,damping,body_mass")
@@ -54,9 +62,17 @@ def _main(args: argparse.Namespace) -> int:
             changes["seed"] = args.seed
         if args.fit:
             changes["fitted"] = tuple(name.strip() for name in args.fit.split(",") if name.strip())
+        if args.effects is not None:
+            changes["effects"] = tuple(name.strip() for name in args.effects.split(",") if name.strip())
         if changes:
             settings = settings.with_changes(**changes)
-        methods = tuple(dict.fromkeys(args.predictor or [settings.predictor]))
+        methods = tuple(dict.fromkeys(args.predictor or ([] if settings.effects else [settings.predictor])))
+        if settings.effects and "lanes" not in methods:
+            methods += ("lanes",)
+        if settings.effects and methods != ("lanes",):
+            others = ", ".join(m for m in methods if m != "lanes")
+            print(f"effects {', '.join(settings.effects)} are fitted by the lanes predictor; {others} ran without them",
+                  file=sys.stderr)
         result = identify(args.recording, settings, methods, show_progress=not args.no_progress,
                           max_strides=args.max_strides)
     except (RecordingError, BagError, ValueError, FileNotFoundError) as exc:
@@ -70,7 +86,9 @@ def _main(args: argparse.Namespace) -> int:
         print(format_parameter_table(cv, result.truth))
         print(f"\n## {method}: Table 4.2 (mean errors [%])\n")
         print(format_error_table(cv))
-        print(f"\nwall time {cv.wall_time:.1f} s")
+        calls = [f.fit.evaluations for f in cv.folds]
+        print(f"\nwall time {cv.wall_time:.1f} s" + (f" (lanes calls per fold {min(calls)}-{max(calls)}, the folds' "
+                                                     "calls batched together)" if method == "lanes" else ""))
     bias = result.aas_bias_pct()
     if bias is not None:
         print("\nAAS bias against the exact model [%]: " + ", ".join(f"{k} {v:+.1f}" for k, v in bias.items()))
@@ -84,9 +102,13 @@ def _main(args: argparse.Namespace) -> int:
         from hopper_ros.reports.identification import write_report
 
         path = write_report(args.output, result, title=f"Identification of {result.recording.source}")
-        model = save_params(result.cross_validations[result.best_method].mean_params(),
-                            f"{args.output}/identified_model.yaml",
+        best = result.cross_validations[result.best_method]
+        effects = best.mean_effects()
+        model = save_params(best.mean_params(), f"{args.output}/identified_model.yaml",
                             comment=f"identified by hopper identify ({result.best_method}, "
-                                    f"{settings.folds}-fold CV mean) from {result.recording.source}")
+                                    f"{settings.folds}-fold CV mean) from {result.recording.source}"
+                                    + (f"\nwith the library effects {', '.join(effects)} (physics.effects; read it with "
+                                       "physics.params.load_model)" if effects else ""),
+                            effects=effects)
         print(f"\nreport {path}\nmodel {model}")
     return 0

@@ -1,8 +1,8 @@
-"""The mismatch tool (issue 9): locate, name and model what the extended TD-SLIP model leaves out.
+"""The mismatch tool (hopper diagnose): where model and recording disagree, which physics is missing."""
 
-    from hopper_ros.diagnosis import diagnose_file
-    result = diagnose_file("run.csv", output="out/")    # result["verdict"]
-"""
+from .data import DiagnosisError  # noqa: F401
 
-from .api import diagnose_file  # noqa: F401
-from .core import DiagnosisError, diagnose, load_settings  # noqa: F401
+
+def diagnose_file(*args, **kwargs):
+    from .api import diagnose_file as run
+    return run(*args, **kwargs)

@@ -1,30 +1,32 @@
-"""Entry point: load a recording and a model, diagnose, write the report."""
+"""Entry point: load a recording and a model (with any library effects it carries), diagnose, write reports."""
 
 from __future__ import annotations
 
 import time
 from pathlib import Path
 
-from hopper_ros.config import load_yaml
 from hopper_ros.identification.recordings import Recording, load_recording
-from hopper_ros.physics.params import ModelParams
+from hopper_ros.physics.params import ModelParams, load_model
 
 from .core import diagnose, load_settings
 
 
-def load_model(path="model.yaml") -> ModelParams:
-    data = load_yaml(path)
-    return ModelParams(**(data["model"] if "model" in data else data))
-
-
-def diagnose_file(recording, model="model.yaml", output=None, settings="diagnosis.yaml") -> dict:
+def diagnose_file(recording, model="model.yaml", output=None, settings="diagnosis.yaml", json_path=None) -> dict:
     started = time.perf_counter()
     rec = recording if isinstance(recording, Recording) else load_recording(recording)
-    params = model if isinstance(model, ModelParams) else load_model(model)
+    if isinstance(model, ModelParams):
+        params, model_effects = model, {}
+    elif isinstance(model, tuple):
+        params, model_effects = model
+    else:
+        params, model_effects = load_model(model)
     cfg = settings if not isinstance(settings, (str, Path)) else load_settings(settings)
-    result = diagnose(rec, params, cfg)
+    result = diagnose(rec, params, cfg, model_effects)
     result["wall_time"] = time.perf_counter() - started
     if output is not None:
         from .report import write_report
         result["report"] = write_report(result, Path(output))
+    if json_path is not None:
+        from .report import write_json
+        result["json"] = write_json(result, Path(json_path))
     return result

@@ -1,286 +1,276 @@
-"""The mismatch tool: locate (per phase/variable residuals), name (candidate effects, fitted
-magnitude, cross-validated ranking with an information criterion), model (refit, before/after).
+"""The mismatch tool: locate (residual forces per phase and event), name (library effects and
+discovered terms, fitted and ranked on held-out strides, with guards), model (refit, before/after).
 
-Plain Python (numpy/scipy); the recording is read by hopper_ros.identification.recordings and
-cut into strides by hopper_ros.identification.strides (phases detected when not labelled).
+Plain Python (numpy/scipy). Candidates are the entries of `physics.effects` and the term sets that
+`discover` finds where `locate` sees a residual above noise; both are searched the same way: one
+magnitude on a grid, every (grid point, stride) a lane of one integration, fitted per fold on the
+training strides, scored on the held-out ones (trajectory SSE and the next apex, E_p, E_v, E_t).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
-from scipy.interpolate import CubicSpline
-from scipy.optimize import minimize_scalar
 
 from hopper_ros.config import load_yaml
-from hopper_ros.identification.recordings import Recording, RecordingError
-from hopper_ros.identification.strides import extract_strides
-from hopper_ros.physics.exact import Phase
+from hopper_ros.identification.recordings import Recording
+from hopper_ros.physics import effects as library
+from hopper_ros.physics import laws
 from hopper_ros.physics.metrics import position_error_pct, time_error_pct, velocity_error_pct
 from hopper_ros.physics.params import ModelParams
 
-from .engine import LANE_PARAMS, simulate_lanes
-
-PHASES = ("descent", "compression", "decompression", "liftoff", "ascent")
-VARIABLES = ("y", "z", "ydot", "zdot", "theta")
-
-
-class DiagnosisError(ValueError):
-    """A recording the tool cannot diagnose (the message says why)."""
-
-
-@dataclass
-class Candidate:
-    name: str
-    kind: str            # "physics" or "sensor"
-    param: str           # lane parameter or sensor key
-    low: float
-    high: float
-    unit: str
-    words: str           # what it means
-    to_magnitude: str = "identity"   # "inverse" for 1/x parameterisations
-
-    def magnitude(self, value: float) -> float:
-        if self.to_magnitude == "inverse":
-            return math.inf if value <= 0 else 1.0 / value
-        return value
+from .data import PHASES, StrideData, prepare
+from .discover import Discovery, discover_site
+from .locate import Location, locate
+from .simulate import Variant, simulate_variants
 
 
 @dataclass
 class Settings:
     folds: int = 5
-    grid: int = 9
+    grid: int = 7
     min_strides: int = 6
-    max_effects: int = 2
-    min_reduction: float = 0.15      # held-out SSE must fall by at least this share
-    min_t: float = 3.0               # one-sided t of the per-stride held-out log-ratio
-    ground_damping: float = 250.0
-    friction_speed: float = 0.005
+    max_effects: int = 3
+    min_reduction: float = 0.10      # held-out trajectory SSE must fall by at least this share ...
+    min_t: float = 3.0               # ... with a one-sided t of the per-stride log ratio
+    apex_tolerance: float = 0.01     # a held-out E_p/E_v/E_t may not grow by more than this share
+    apex_improvement: float = 0.03   # ... and their sum must fall by at least this share
+    sensor_margin: float = 0.15      # a sensor effect must beat the best physics effect's reduction by this share
+    discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
+    tie_t: float = 2.5               # an effect fitting held-out strides not worse by this t is a look-alike ...
+    tie_share: float = 0.02          # ... and so is one whose reduction is within this share of the best's
+    locate_threshold: float = 2.0    # residual over noise for a site to stand out
+    screen: int = 8                  # candidates the screening passes on to the full search
+    screen_strides: int = 24         # strides the screening uses
     liftoff_window: float = 0.003
-    candidates: list = field(default_factory=list)
 
 
 def load_settings(path="diagnosis.yaml") -> Settings:
-    data = load_yaml(path)["diagnosis"]
-    cands = [Candidate(**c) for c in data.pop("candidates")]
-    return Settings(**data, candidates=cands)
-
-
-# ---------------------------------------------------------------------------- data
-
-
-def check_recording(rec: Recording) -> None:
-    period = rec.period
-    if not 0.99e-3 <= period <= 1.01e-3:
-        raise DiagnosisError(f"{rec.source}: the samples are {period * 1e3:.3f} ms apart; the tool needs a 1 kHz "
-                             "time base (resample the recording first)")
-    steps = np.diff(rec.t)
-    bad = np.flatnonzero((steps > 1.5e-3) & (steps < 3 * period))
-    if bad.size > 0.01 * len(steps):
-        raise DiagnosisError(f"{rec.source}: irregular time base ({bad.size} steps between 1.5 and 3 ms)")
-
-
-def noise_level(x: np.ndarray, mask: np.ndarray) -> float:
-    """Sensor noise std from the third differences over flight samples (robust, MAD)."""
-    d3 = x[3:] - 3 * x[2:-1] + 3 * x[1:-2] - x[:-3]
-    ok = mask[3:] & mask[:-3]
-    d3 = d3[ok]
-    if d3.size < 20:
-        return float("nan")
-    q = np.diff(np.unique(np.round(x, 12)))
-    floor = float(np.median(q[q > 0]) / math.sqrt(12)) if np.any(q > 0) else 1e-7
-    return max(1.4826 * float(np.median(np.abs(d3 - np.median(d3)))) / math.sqrt(20.0), floor, 1e-7)
+    data = load_yaml(path)
+    values = data.get("diagnosis", data) if isinstance(data, dict) else None
+    if not isinstance(values, dict):
+        raise ValueError(f"{path}: expected a mapping under `diagnosis:`")
+    known = {f for f in Settings.__dataclass_fields__}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"{path}: diagnosis: unknown key(s) {unknown}; known: {sorted(known)}")
+    try:
+        return Settings(**{k: type(getattr(Settings, k))(v) for k, v in values.items()})
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: diagnosis: {exc}") from None
 
 
 @dataclass
-class StrideData:
-    rec: Recording
-    strides: object
-    params: ModelParams
-    sigma: dict
-    phase: np.ndarray        # per sample: index into PHASES, -1 outside strides
-    duration: float
-    sample_count: int = 0
-    corr_length: float = 1.0
+class Candidate:
+    name: str
+    kind: str                     # physics | sensor | discovered
+    family: str
+    site: str
+    unit: str
+    words: str
+    low: float                    # search bounds of its one magnitude (search units)
+    high: float
+    build: Callable               # (variant, value) -> variant
+    physical: Callable            # value -> magnitude in `unit`
+    separate: str = ""
+    plausible: tuple = (0.0, math.inf)
+    off: float = 0.0              # the magnitude (physical) at which a sensor fault is off
+    origin: float = 0.0           # the search value at which the candidate changes nothing
+    discovery: Discovery | None = None
+    equation: str = ""
+
+    def describe(self, value: float) -> str:
+        if self.discovery is not None:
+            return self.discovery.words(value)
+        return self.words
 
 
-def prepare(rec: Recording, params: ModelParams, settings: Settings) -> StrideData:
-    check_recording(rec)
-    strides = extract_strides(rec, params.rest_length)
-    if len(strides) < settings.min_strides:
-        raise DiagnosisError(f"{rec.source}: only {len(strides)} complete apex-to-apex strides found "
-                             f"(at least {settings.min_strides} needed; rejected: {strides.rejected[:3]})")
-    labels = strides.phase
-    phase = np.full(len(rec), -1)
-    phase[labels == Phase.DESCENT] = 0
-    phase[labels == Phase.COMPRESSION] = 1
-    phase[labels == Phase.DECOMPRESSION] = 2
-    phase[labels == Phase.ASCENT] = 4
-    inside = np.zeros(len(rec), bool)
-    for a, b in zip(strides.start, strides.stop):
-        inside[a:b] = True
-    for lo in strides.liftoff_time:
-        phase[np.abs(rec.t - lo) <= settings.liftoff_window] = 3
-    phase[~inside] = -1
-    flight = (labels == Phase.DESCENT) | (labels == Phase.ASCENT)
-    sigma = {v: noise_level(getattr(rec, v), flight) for v in ("y", "z", "theta")}
-    stance = (labels == Phase.COMPRESSION) | (labels == Phase.DECOMPRESSION)
-    if not np.isfinite(sigma["theta"]):
-        sigma["theta"] = noise_level(rec.theta, stance)
-    for v in sigma:
-        if not np.isfinite(sigma[v]):
-            sigma[v] = 1e-4
-    duration = float(np.max(rec.t[strides.stop - 1] - strides.apex_time)) + 0.01
-    return StrideData(rec, strides, params, sigma, phase, duration)
+LOCATED_SITES = {  # library site -> located sites where it shows first
+    "flight": ("flight_horizontal", "flight_vertical"), "touchdown": ("touchdown_along", "touchdown_across"),
+    "stance_leg": ("stance_along",), "stance_hip": ("stance_hip",), "actuator": ("stance_hip",),
+    "liftoff": ("liftoff_along", "liftoff_across"), "sensor": (),
+}
 
 
-# ---------------------------------------------------------------------------- simulation
-
-
-def base_params(params: ModelParams, settings: Settings) -> dict:
-    return {"g": params.gravity, "dh": params.flight_damping_horizontal, "dv": params.flight_damping_vertical,
-            "collision": params.body_mass / (params.body_mass + params.toe_mass), "friction": 0.0,
-            "friction_speed": settings.friction_speed, "compliance": 0.0, "ground_damping": settings.ground_damping,
-            "impact": 0.0, "inv_max_torque": 0.0, "delay": 0.0}
-
-
-def _apply(variant: dict, cand: Candidate, value: float, params: ModelParams) -> None:
-    if cand.kind == "sensor":
-        variant.setdefault("_sensor", {})[cand.param] = value
-    elif cand.param == "toe_mass":
-        variant["collision"] = params.body_mass / (params.body_mass + value)
+def library_candidate(effect: library.Effect, base: laws.Coefficients) -> Candidate:
+    low, high = effect.search_bounds(base)
+    p = effect.primary
+    if p.coefficient == "toe_mass":
+        origin = float(base.mass) * (1.0 / float(base.collision_factor) - 1.0)
+    elif p.coefficient in laws.Coefficients.scalar_names():
+        origin = effect.search_value(float(getattr(base, p.coefficient)))
     else:
-        variant[cand.param] = value
+        origin = library.SENSOR_OFF.get(p.coefficient, 0.0)
+
+    def build(variant: Variant, value: float, effect=effect) -> Variant:
+        changes = effect.coefficients(value, variant.coefficients)
+        if effect.kind == "sensor":
+            return variant.with_changes(sensors=changes)
+        return variant.with_changes(coefficients=changes)
+
+    return Candidate(effect.name, effect.kind, effect.family, effect.site, effect.primary.unit, effect.words,
+                     low, high, build, effect.physical, effect.separate, effect.primary.plausible,
+                     off=library.SENSOR_OFF.get(p.coefficient, 0.0), origin=origin, equation=effect.equation)
 
 
-def simulate_variants(data: StrideData, variants: list[dict], keep_series: bool = False):
-    """Every stride under every variant. Returns per (variant, stride): SSE (normalised), per-phase
-    and per-variable sums, next-apex predictions; optionally the residual series."""
-    s, rec, params = data.strides, data.rec, data.params
-    ns, nv = len(s), len(variants)
-    lanes = {k: np.empty(nv * ns) for k in LANE_PARAMS}
-    z0 = np.empty(nv * ns)
-    yd0 = np.tile(s.forward_speed, nv)
-    shift = {c: np.zeros(nv * ns) for c in ("y", "z", "theta")}
-    scale = {c: np.ones(nv * ns) for c in ("y", "z", "theta")}
-    for i, var in enumerate(variants):
-        sl = slice(i * ns, (i + 1) * ns)
-        for kname in LANE_PARAMS:
-            lanes[kname][sl] = var[kname]
-        sensor = var.get("_sensor", {})
-        for c in ("y", "z", "theta"):
-            shift[c][sl] = sensor.get(f"{c}_delay", 0.0)
-            scale[c][sl] = sensor.get(f"{c}_scale", 1.0)
-        z0[sl] = s.apex_height / scale["z"][sl]
-    res = simulate_lanes(z0, yd0 / scale["y"], np.tile(s.touchdown_angle, nv) / scale["theta"],
-                         np.tile(s.tau_0, nv), np.tile(s.ramp_duration, nv), lanes, mass=params.body_mass,
-                         stiffness=params.stiffness, damping=params.damping, rest_length=params.rest_length,
-                         duration=data.duration + 0.02)
-    nsamp = res.y.shape[1]
-    sse = np.zeros((nv, ns))
-    by_phase = np.zeros((nv, ns, len(PHASES), 3))
-    counts = np.zeros((ns, len(PHASES), 3))
-    series = []
-    for i in range(ns):
-        a, b = int(s.start[i]), int(s.stop[i])
-        tk = rec.t[a:b]
-        ph = data.phase[a:b]
-        meas = {"y": rec.y[a:b] - s.apex_y[i], "z": rec.z[a:b], "theta": rec.theta[a:b]}
-        stance = (ph == 1) | (ph == 2)
-        lane_idx = np.arange(nv) * ns + i
-        resid = {}
-        for ci, c in enumerate(("y", "z", "theta")):
-            # lane time: the recorded apex is the measured one; a delayed channel z puts the true apex earlier
-            tau = (tk - s.apex_time[i])[None, :] + shift["z"][lane_idx, None] - shift[c][lane_idx, None]
-            pos = np.clip(tau / 1e-3, 0, nsamp - 1.001)
-            j0 = np.floor(pos).astype(int)
-            w = pos - j0
-            arr = getattr(res, c)[lane_idx]
-            val = np.take_along_axis(arr, j0, 1) * (1 - w) + np.take_along_axis(arr, j0 + 1, 1) * w
-            if c == "y":   # the measured apex y is where the sim starts; a delayed z moves that start
-                val = val - (shift["z"][lane_idx, None] - shift["y"][lane_idx, None]) * s.forward_speed[i]
-            val = val * scale[c][lane_idx, None]
-            r = (meas[c][None, :] - val) / data.sigma[c]
-            r = np.where(np.isfinite(r), r, 1e3)
-            if c == "theta":
-                r = np.where(stance[None, :], r, 0.0)
-            resid[c] = r
-            sse[:, i] += np.sum(r * r, axis=1)
-            for pi in range(len(PHASES)):
-                msk = ph == pi
-                by_phase[:, i, pi, ci] = np.sum(r[:, msk] ** 2, axis=1)
-                counts[i, pi, ci] = msk.sum() if c != "theta" else (msk & stance).sum()
-        if keep_series:
-            series.append({c: resid[c] * data.sigma[c] for c in resid})
-    pred = {"height": res.next_apex_height.reshape(nv, ns) * scale["z"].reshape(nv, ns),
-            "speed": res.next_forward_speed.reshape(nv, ns) * scale["y"].reshape(nv, ns),
-            "time": res.stride_time.reshape(nv, ns),
-            "length": res.stride_length.reshape(nv, ns) * scale["y"].reshape(nv, ns)}
-    return {"sse": sse, "by_phase": by_phase, "counts": counts, "pred": pred, "series": series, "raw": res}
+def discovered_candidate(found: Discovery) -> Candidate:
+    def build(variant: Variant, value: float, found=found) -> Variant:
+        old = getattr(variant.coefficients, found.field)
+        new = tuple(float(o) + value * c for o, c in zip(old, found.coefficients))
+        return variant.with_changes(coefficients={found.field: new})
+
+    return Candidate(f"discovered_{found.site}", "discovered", "discovered", found.site, "x fitted terms",
+                     found.words(), 0.0, 2.0, build, float,
+                     "a force plate, or strides that lengthen the phase where the terms act", discovery=found,
+                     equation=" + ".join(f"{c:+.4g} {k}" for k, c, _, _ in found.terms()))
 
 
 # ---------------------------------------------------------------------------- ranking
+
+
+def search_grid(c: Candidate, n: int) -> np.ndarray:
+    """n magnitudes between the bounds, denser near the candidate's "off" value (small effects are common)."""
+    origin = float(np.clip(c.origin, c.low, c.high))
+    span = c.high - c.low
+    below = int(round((n - 1) * (origin - c.low) / span)) if span > 0 else 0
+    above = n - 1 - below
+    u_below = np.linspace(1.0, 0.0, below + 1)[:-1] ** 2 if below else np.empty(0)
+    u_above = np.linspace(0.0, 1.0, above + 1)[1:] ** 2 if above else np.empty(0)
+    return np.concatenate([origin - (origin - c.low) * u_below, [origin], origin + (c.high - origin) * u_above])
 
 
 def _folds(n: int, k: int) -> np.ndarray:
     return np.arange(n) % max(2, min(k, n))
 
 
-def rank_candidates(data: StrideData, current: dict, candidates: list[Candidate], settings: Settings, base_sse,
-                    grids: dict | None = None):
-    """Grid each candidate's magnitude on top of `current`, fit it per fold on the training strides,
-    score on the held-out ones. Returns a list of result dicts, best first."""
-    variants, index = [], []
-    grids = grids or {c.name: np.linspace(c.low, c.high, settings.grid) for c in candidates}
-    for c in candidates:
-        for v in grids[c.name]:
-            var = dict(current)
-            var["_sensor"] = dict(current.get("_sensor", {}))
-            _apply(var, c, float(v), data.params)
-            variants.append(var)
-            index.append(c.name)
+def _errors(data: StrideData, pred: dict) -> dict:
+    """Mean E_p, E_v, E_t (4.1)-(4.3) of the next apex over the strides the model completes; `fallen` counts
+    the strides it does not (their errors cannot be computed: a model that drops strides is not better)."""
+    s = data.strides
+    ep = position_error_pct(s.next_apex_height, s.stride_length, pred["height"], pred["length"])
+    ev = velocity_error_pct(s.next_forward_speed, pred["speed"])
+    et = time_error_pct(s.stride_time, pred["time"])
+    done = np.isfinite(ep) & np.isfinite(ev) & np.isfinite(et)
+    if not done.any():
+        return {"E_p": math.inf, "E_v": math.inf, "E_t": math.inf, "fallen": int(done.size)}
+    return {"E_p": float(np.mean(ep[done])), "E_v": float(np.mean(ev[done])), "E_t": float(np.mean(et[done])),
+            "fallen": int(done.size - done.sum())}
+
+
+def _interp_pred(grid, pred_grid: dict, values: np.ndarray) -> dict:
+    """Next-apex predictions per stride at per-stride magnitudes, interpolated on the grid."""
+    out = {}
+    for key, arr in pred_grid.items():       # arr: (grid, strides)
+        col = np.empty(arr.shape[1])
+        for i in range(arr.shape[1]):
+            ok = np.isfinite(arr[:, i])
+            col[i] = np.interp(values[i], grid[ok], arr[ok, i]) if ok.sum() >= 2 else np.nan
+        out[key] = col
+    return out
+
+
+def rank_candidates(data: StrideData, current: Variant, candidates: list[Candidate], settings: Settings,
+                    base_sse: np.ndarray, base_errors: dict, grids: dict | None = None) -> list[dict]:
+    """Grid each candidate's magnitude on top of `current`, fit it per fold on the training strides, score it
+    on the held-out ones. Returns result dicts, best first."""
+    if not candidates:
+        return []
+    grids = grids or {c.name: search_grid(c, settings.grid) for c in candidates}
+    variants = [c.build(current, float(v)) for c in candidates for v in grids[c.name]]
     sim = simulate_variants(data, variants)
-    sse_all = sim["sse"]
-    n = sse_all.shape[1]
+    n = sim["sse"].shape[1]
     fold = _folds(n, settings.folds)
-    results = []
-    row = 0
+    results, row = [], 0
     for c in candidates:
         grid = grids[c.name]
-        sse = sse_all[row:row + len(grid)]
+        sse = sim["sse"][row:row + len(grid)]
+        pred_grid = {k: v[row:row + len(grid)] for k, v in sim["pred"].items()}
         row += len(grid)
-        logs = np.log(np.maximum(sse, 1e-12))
-        spline_i = CubicSpline(grid, logs, axis=0)
+        floor = 0.5 * sse.min(axis=0)
         held = np.empty(n)
-        mags = []
+        held_values = np.empty(n)
+        fold_values = []
+
+        def fit(columns):
+            return _vertex(grid, sse[:, columns].sum(axis=1))
+
         for f in np.unique(fold):
             train = fold != f
-            tot = CubicSpline(grid, np.log(sse[:, train].sum(axis=1)))
-            best = int(np.argmin(tot(grid)))
-            lo, hi = grid[max(0, best - 1)], grid[min(len(grid) - 1, best + 1)]
-            m = minimize_scalar(tot, bounds=(lo, hi), method="bounded").x if hi > lo else grid[best]
-            mags.append(m)
-            held[~train] = np.exp(spline_i(m)[~train])
-        tot = CubicSpline(grid, np.log(sse.sum(axis=1)))
-        best = int(np.argmin(tot(grid)))
-        lo, hi = grid[max(0, best - 1)], grid[min(len(grid) - 1, best + 1)]
-        m_all = float(minimize_scalar(tot, bounds=(lo, hi), method="bounded").x) if hi > lo else float(grid[best])
+            m = fit(train)
+            fold_values.append(m)
+            held[~train] = np.maximum(_quadratic_at(grid, sse[:, ~train], m), floor[~train])
+            held_values[~train] = m
+        value = fit(np.ones(n, bool))
+        fit_total = float(_quadratic_at(grid, sse.sum(axis=1)[:, None], value)[0])
         d = np.log(base_sse / held)
-        t_stat = float(d.mean() / (d.std(ddof=1) / math.sqrt(n))) if d.std(ddof=1) > 0 else 0.0
+        sd = d.std(ddof=1)
+        t_stat = float(d.mean() / (sd / math.sqrt(n))) if sd > 0 else 0.0
         reduction = 1.0 - held.sum() / base_sse.sum()
-        n_samples = data.sample_count
-        n_eff = n_samples / data.corr_length
+        n_eff = data.sample_count / data.corr_length
         llr = 0.5 * n_eff * math.log(base_sse.sum() / held.sum())
-        delta_bic = -2 * llr + math.log(n_eff)
-        results.append({"name": c.name, "candidate": c, "value": m_all, "fold_values": mags,
-                        "magnitude": c.magnitude(m_all), "reduction": float(reduction), "t": t_stat,
-                        "cv_llr": float(llr), "delta_bic": float(delta_bic), "held_sse": held,
-                        "significant": bool(reduction >= settings.min_reduction and t_stat >= settings.min_t
-                                            and delta_bic < 0), "grid": grid})
-    results.sort(key=lambda r: r["delta_bic"])
-    return results, fold
+        errors = _errors(data, _interp_pred(grid, pred_grid, held_values))
+        results.append({"name": c.name, "candidate": c, "value": value, "fold_values": fold_values,
+                        "magnitude": c.physical(value), "reduction": float(reduction), "t": t_stat,
+                        "fit_reduction": float(1.0 - max(fit_total, 0.0) / base_sse.sum()),
+                        "delta_bic": float(-2 * llr + math.log(n_eff)), "held_sse": held, "errors": errors,
+                        "grid": grid})
+    for r in results:
+        _guards(r, base_errors, settings)
+    results.sort(key=lambda r: -r["reduction"])
+    return results
+
+
+def _vertex(grid: np.ndarray, values: np.ndarray) -> float:
+    """Where a sampled SSE is lowest: the vertex of the parabola through the best grid point and its neighbours
+    (an SSE is quadratic in a magnitude near its minimum; its logarithm is not)."""
+    k = int(np.argmin(values))
+    j = min(max(k, 1), len(grid) - 2)
+    x, y = grid[j - 1:j + 2], values[j - 1:j + 2]
+    a = np.polyfit(x, y, 2)
+    if a[0] <= 0:
+        return float(grid[k])
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    return float(np.clip(-a[1] / (2 * a[0]), lo, hi))
+
+
+def _quadratic_at(grid: np.ndarray, values: np.ndarray, x: float) -> np.ndarray:
+    """Columns of `values` (grid x columns) interpolated at x through the three nearest grid points."""
+    k = int(np.clip(np.searchsorted(grid, x), 1, len(grid) - 2))
+    xs = grid[k - 1:k + 2]
+    out = 0.0
+    for j in range(3):
+        others = [xs[i] for i in range(3) if i != j]
+        out = out + values[k - 1 + j] * ((x - others[0]) * (x - others[1]) / ((xs[j] - others[0]) * (xs[j] - others[1])))
+    return out
+
+
+def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
+    """Trajectory and next-apex criteria on held-out strides; a sensor's magnitude must be a real sensor's."""
+    why = []
+    if r["reduction"] < settings.min_reduction:
+        why.append(f"held-out trajectory residual falls only {100 * r['reduction']:.1f} %")
+    if r["t"] < settings.min_t:
+        why.append(f"not consistent over strides (t {r['t']:.1f})")
+    if r["delta_bic"] >= 0:
+        why.append("information criterion against it")
+    e, b = r["errors"], base_errors
+    keys = ("E_p", "E_v", "E_t")
+    worse = [k for k in keys if not e[k] <= b[k] * (1 + settings.apex_tolerance) + 1e-6]
+    if worse:
+        why.append("held-out " + ", ".join(worse) + " worse")
+    if not sum(e[k] for k in keys) <= sum(b[k] for k in keys) * (1 - settings.apex_improvement):
+        why.append("the next apex is not predicted better")
+    if e["fallen"] > b["fallen"]:
+        why.append(f"{e['fallen'] - b['fallen']} more strides fall")
+    c = r["candidate"]
+    if c.kind == "sensor" and not (c.plausible[0] <= abs(r["magnitude"] - c.off) <= c.plausible[1]):
+        why.append(f"{r['magnitude']:.4g} {c.unit} is not a fault a real sensor has and this data resolves")
+    r["rejected"] = why
+    r["significant"] = not why
 
 
 def correlation_length(resid: np.ndarray) -> float:
@@ -293,202 +283,194 @@ def correlation_length(resid: np.ndarray) -> float:
     return float(max(1.0, 1.0 + 2.0 * ac[1:cut].sum()))
 
 
-# ---------------------------------------------------------------------------- the pipeline
+def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[dict]]:
+    """The accepted effect of a round and those it cannot be told apart from on this data.
+
+    A sensor fault must beat the best physics effect, a discovered term set the best library effect,
+    by a margin. Any other effect that passed its guards (with or without a margin) whose held-out
+    fit is not worse than the accepted one's by a one-sided t of `tie_t` over strides is reported beside it
+    as not separable."""
+    passed = [r for r in ranking if r["significant"]]
+    best_physics = max((r["reduction"] for r in passed if r["candidate"].kind == "physics"), default=0.0)
+    best_library = max((r["reduction"] for r in passed if r["candidate"].kind != "discovered"), default=0.0)
+    for r in passed:
+        c = r["candidate"]
+        if c.kind == "sensor" and r["reduction"] < best_physics + settings.sensor_margin * r["reduction"]:
+            r["significant"] = False
+            r["rejected"].append("a physics effect explains the same residual about as well")
+        if c.kind == "discovered" and r["reduction"] < best_library + settings.discovery_margin * r["reduction"]:
+            r["significant"] = False
+            r["rejected"].append("a library effect explains it about as well")
+    ok = [r for r in ranking if r["significant"]]
+    if not ok:
+        return None, []
+    top = max(ok, key=lambda r: r["reduction"])
+    ties = [r for r in passed if r is not top and (_paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t
+                                                    or r["reduction"] >= top["reduction"] * (1 - settings.tie_share))]
+    return top, ties
 
 
-def _errors(data: StrideData, pred: dict) -> dict:
-    s = data.strides
-    ep = position_error_pct(s.next_apex_height, s.stride_length, pred["height"], pred["length"])
-    ev = velocity_error_pct(s.next_forward_speed, pred["speed"])
-    et = time_error_pct(s.stride_time, pred["time"])
-    return {"E_p": float(np.nanmean(ep)), "E_v": float(np.nanmean(ev)), "E_t": float(np.nanmean(et))}
+def _paired_t(worse: np.ndarray, better: np.ndarray) -> float:
+    """One-sided t over strides that `worse` fits held-out strides worse than `better`."""
+    d = np.log(worse / better)
+    sd = d.std(ddof=1)
+    return float(d.mean() / (sd / math.sqrt(len(d)))) if sd > 0 else (math.inf if d.mean() > 0 else 0.0)
+
+
+def _screen(data: StrideData, current: Variant, candidates: list[Candidate], settings: Settings,
+            located: set) -> list[Candidate]:
+    """The candidates worth a full search: the best by trajectory reduction on a subset of strides
+    (coarse grid), plus every candidate acting where locate sees a residual."""
+    n = len(data.strides)
+    if len(candidates) <= settings.screen:
+        return candidates
+    index = np.linspace(0, n - 1, min(n, settings.screen_strides)).round().astype(int)
+    sub = dataclasses.replace(data, strides=data.strides.subset(index))
+    first = simulate_variants(sub, [current])
+    errors = _errors(sub, {k: v[0] for k, v in first["pred"].items()})
+    ranked = rank_candidates(sub, current, candidates, dataclasses.replace(settings, grid=5), first["sse"][0], errors)
+    ranked.sort(key=lambda r: -r["fit_reduction"])
+    keep = {r["name"] for r in ranked[:settings.screen]}
+    keep |= {c.name for c in candidates if c.kind != "sensor" and set(LOCATED_SITES[c.site]) & located
+             and any(r["name"] == c.name and r["reduction"] > 0 for r in ranked)}
+    return [c for c in candidates if c.name in keep]
+
+
+def _refine(data, current, ranking, settings, base_sse, base_errors, exact: int = 12) -> list[dict]:
+    """Every candidate again on a fine grid between the neighbours of its best grid value (an SSE is not
+    parabolic where an effect switches on, e.g. a torque limit), then the best scored from strides simulated
+    at their fold magnitudes (no interpolation)."""
+    grids = {}
+    for r in ranking:
+        grid, c = r["grid"], r["candidate"]
+        k = int(np.argmin(np.abs(grid - r["value"])))
+        grids[c.name] = np.linspace(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)], settings.grid)
+    refined = {r["name"]: r for r in rank_candidates(data, current, [r["candidate"] for r in ranking], settings,
+                                                       base_sse, base_errors, grids=grids)}
+    ranking = [refined[r["name"]] if refined[r["name"]]["fit_reduction"] > r["fit_reduction"] else r
+               for r in ranking]
+    ranking.sort(key=lambda r: -r["fit_reduction"])
+    best = ranking[:exact] + [r for r in ranking[exact:] if r["candidate"].kind == "discovered"]
+    _evaluate_exactly(data, current, best, settings, base_sse, base_errors)
+    ranking.sort(key=lambda r: -r["reduction"])
+    return ranking
+
+
+def _evaluate_exactly(data, current, results, settings, base_sse, base_errors) -> None:
+    """Held-out scores of fitted candidates from strides simulated at their fold magnitudes (no interpolation)."""
+    fold = _folds(len(data.strides), settings.folds)
+    folds = list(np.unique(fold))
+    variants = [r["candidate"].build(current, float(v)) for r in results for v in r["fold_values"]]
+    sim = simulate_variants(data, variants)
+    idx = np.array([folds.index(f) for f in fold])
+    cols = np.arange(len(fold))
+    n = len(fold)
+    for k, r in enumerate(results):
+        rows = k * len(folds) + idx
+        held = sim["sse"][rows, cols]
+        pred = {key: v[rows, cols] for key, v in sim["pred"].items()}
+        d = np.log(base_sse / held)
+        sd = d.std(ddof=1)
+        r["held_sse"] = held
+        r["t"] = float(d.mean() / (sd / math.sqrt(n))) if sd > 0 else 0.0
+        r["reduction"] = float(1.0 - held.sum() / base_sse.sum())
+        n_eff = data.sample_count / data.corr_length
+        r["delta_bic"] = float(-2 * 0.5 * n_eff * math.log(base_sse.sum() / held.sum()) + math.log(n_eff))
+        r["errors"] = _errors(data, pred)
+        _guards(r, base_errors, settings)
+
+
+def _held_out_variants(data: StrideData, base: Variant, chosen: list[dict], fold: np.ndarray) -> dict:
+    """Per-stride next apex with the chosen effects at the magnitudes fitted without the stride's fold."""
+    folds = list(np.unique(fold))
+    variants = []
+    for fi in range(len(folds)):
+        v = base
+        for r in chosen:
+            v = r["candidate"].build(v, float(r["fold_values"][fi]))
+        variants.append(v)
+    sim = simulate_variants(data, variants)
+    idx = np.array([folds.index(f) for f in fold])
+    return {k: sim["pred"][k][idx, np.arange(len(fold))] for k in sim["pred"]}
+
+
+def base_variant(params: ModelParams, model_effects: dict | None = None) -> Variant:
+    coefficients, sensors = library.apply(laws.Coefficients.from_model(params), model_effects or {})
+    return Variant(coefficients, sensors)
+
+
+def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effects: dict | None = None) -> dict:
+    data = prepare(rec, params, settings.min_strides, settings.liftoff_window)
+    base = base_variant(params, model_effects)
+    base_sim = simulate_variants(data, [base], keep_series=True)
+    data.corr_length = max(1.0, float(np.median([correlation_length(r["z"][0]) for r in base_sim["series"]])))
+    fold = _folds(len(data.strides), settings.folds)
+    current, current_sse = base, base_sim["sse"][0]
+    base_errors = current_errors = _errors(data, {k: v[0] for k, v in base_sim["pred"].items()})
+    chosen, rounds, ties_all, discoveries = [], [], [], []
+    first_location = None
+    for round_index in range(settings.max_effects):
+        locations, sets = locate(data, current)
+        if first_location is None:
+            first_location = locations
+        located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
+        taken = {r["name"] for r in chosen}
+        cands = [library_candidate(e, current.coefficients) for e in library.LIBRARY + library.SENSORS
+                 if e.name not in taken]
+        cands = _screen(data, current, cands, settings, located)
+        for site in sorted(located):
+            found = discover_site(site, sets)
+            if found is not None and f"discovered_{site}" not in taken:
+                discoveries.append(found)
+                cands.append(discovered_candidate(found))
+        ranking = rank_candidates(data, current, cands, settings, current_sse, current_errors)
+        ranking = _refine(data, current, ranking, settings, current_sse, current_errors)
+        top, ties = _choose(ranking, settings)
+        rounds.append(ranking)
+        if top is None:
+            break
+        top["ties"] = ties
+        top["location"] = [loc for loc in locations if loc.ratio >= settings.locate_threshold]
+        chosen.append(top)
+        current = top["candidate"].build(current, top["value"])
+        current_sse = top["held_sse"]
+        current_errors = top["errors"]
+    final_sim = simulate_variants(data, [base, current], keep_series=True)
+    before = base_errors
+    after = _errors(data, _held_out_variants(data, base, chosen, fold)) if chosen else before
+    residual_location = locate(data, current)[0] if chosen else first_location
+    return {"data": data, "rounds": rounds, "chosen": chosen, "before_phase": _rms_table(final_sim, 0, data),
+            "after_phase": _rms_table(final_sim, 1, data), "before": before, "after": after,
+            "base_series": base_sim["series"], "after_series": final_sim["series"], "location": first_location,
+            "residual_location": residual_location, "discoveries": discoveries, "verdict": verdict(chosen),
+            "settings": settings, "model_effects": dict(model_effects or {})}
 
 
 def _rms_table(sim: dict, row: int, data: StrideData) -> dict:
-    bp = sim["by_phase"][row].sum(axis=0)          # phases x vars
+    bp = sim["by_phase"][row].sum(axis=0)
     cnt = sim["counts"].sum(axis=0)
-    out = {}
-    for pi, ph in enumerate(PHASES):
-        out[ph] = {v: (float(math.sqrt(bp[pi, ci] / cnt[pi, ci])) if cnt[pi, ci] else float("nan"))
-                   for ci, v in enumerate(("y", "z", "theta"))}
-    return out
+    return {ph: {v: (float(math.sqrt(bp[pi, ci] / cnt[pi, ci])) if cnt[pi, ci] else float("nan"))
+                 for ci, v in enumerate(("y", "z", "theta"))} for pi, ph in enumerate(PHASES)}
 
 
-def _held_out_variants(base: dict, chosen: list, fold_values: list, data: StrideData, fold: np.ndarray):
-    """Per-stride model: the chosen effects at the magnitudes fitted without the stride's fold."""
-    folds = np.unique(fold)
-    variants = []
-    for fi, _ in enumerate(folds):
-        var = dict(base)
-        var["_sensor"] = dict(base.get("_sensor", {}))
-        for c, vals in zip(chosen, fold_values):
-            _apply(var, c, float(vals[fi]), data.params)
-        variants.append(var)
-    sim = simulate_variants(data, variants)
-    n = len(fold)
-    pick = {k: np.array([sim["pred"][k][list(folds).index(fold[i]), i] for i in range(n)]) for k in sim["pred"]}
-    return pick
-
-
-def diagnose(rec: Recording, params: ModelParams, settings: Settings) -> dict:
-    data = prepare(rec, params, settings)
-    base = base_params(params, settings)
-    base_sim = simulate_variants(data, [base], keep_series=True)
-    base_sse = base_sim["sse"][0]
-    allres = np.concatenate([r["z"][0] / data.sigma["z"] for r in base_sim["series"]])
-    data.sample_count = int(sum(int(b - a) for a, b in zip(data.strides.start, data.strides.stop)))
-    # correlation length of the normalised residual under pure noise: measured on flight residual diffs
-    data.corr_length = float(np.median([correlation_length(r["z"][0]) for r in base_sim["series"]]))
-    data.corr_length = max(data.corr_length, 1.0)
-    chosen, chosen_res, current = [], [], dict(base)
-    current["_sensor"] = {}
-    current_sse = base_sse
-    rounds = []
-    remaining = list(settings.candidates)
-    for _ in range(settings.max_effects):
-        ranking, fold = rank_candidates(data, current, remaining, settings, current_sse)
-        top = ranking[0]
-        if top["significant"]:  # refine its magnitude on a fine grid around the coarse fit
-            step = top["grid"][1] - top["grid"][0]
-            fine = np.linspace(max(top["candidate"].low, top["value"] - step), min(top["candidate"].high,
-                                                                                  top["value"] + step), settings.grid)
-            refined, fold = rank_candidates(data, current, [top["candidate"]], settings, current_sse,
-                                            grids={top["name"]: fine})
-            refined[0]["significant"] = refined[0]["significant"] or top["significant"]
-            ranking[0] = top = refined[0]
-        rounds.append(ranking)
-        if not top["significant"]:
-            break
-        chosen.append(top["candidate"])
-        chosen_res.append(top)
-        _apply(current, top["candidate"], top["value"], params)
-        current_sse = top["held_sse"]
-        remaining = [c for c in remaining if c.name != top["name"]]
-    final_sim = simulate_variants(data, [base, current], keep_series=True)
-    fold = _folds(len(data.strides), settings.folds)
-    before = _errors(data, {k: v[0] for k, v in final_sim["pred"].items()})
-    if chosen:
-        after = _errors(data, _held_out_variants(base, chosen, [r["fold_values"] for r in chosen_res], data, fold))
-    else:
-        after = before
-    # SINDy-like fall-back on the residual accelerations in stance (what remains after the chosen effects)
-    sparse = sparse_terms(data, final_sim, 1 if chosen else 0)
-    locate = locate_mismatch(data, base_sim)
-    return {"data": data, "rounds": rounds, "chosen": chosen_res, "before_phase": _rms_table(final_sim, 0, data),
-            "after_phase": _rms_table(final_sim, 1, data), "before": before, "after": after,
-            "base_series": base_sim["series"], "after_series": final_sim["series"], "locate": locate,
-            "sparse": sparse, "verdict": _verdict(chosen_res), "final_sim": final_sim}
-
-
-def _verdict(chosen) -> str:
+def verdict(chosen: list[dict]) -> str:
     if not chosen:
         return "no significant mismatch"
     parts = []
     for r in chosen:
         c = r["candidate"]
-        parts.append(f"{c.name} = {r['magnitude']:.4g} {c.unit}")
+        if c.kind == "discovered":
+            text = f"{c.name}: {c.describe(r['value'])}"
+        else:
+            text = f"{c.name} = {r['magnitude']:.4g} {c.unit}".rstrip()
+        if r.get("ties"):
+            text += " (or " + " or ".join(t["name"] for t in r["ties"]) + ": not separable on this data)"
+        parts.append(text)
     return "missing: " + ", ".join(parts)
 
 
-def locate_mismatch(data: StrideData, base_sim: dict) -> dict:
-    """Where the baseline residual lives: per phase and variable, RMS against the noise, the worst window."""
-    s, rec = data.strides, data.rec
-    from scipy.signal import savgol_filter
-    table = {}
-    acc = {ph: {v: [] for v in VARIABLES} for ph in PHASES}
-    raw = base_sim["raw"]
-    worst = (0.0, None)
-    for i, series in enumerate(base_sim["series"]):
-        a, b = int(s.start[i]), int(s.stop[i])
-        ph = data.phase[a:b]
-        tk = rec.t[a:b] - s.apex_time[i]
-        j = np.clip(np.round(tk / 1e-3).astype(int), 0, raw.y.shape[1] - 1)
-        vel = {}
-        for v, src, sim_arr in (("ydot", rec.y, raw.ydot), ("zdot", rec.z, raw.zdot)):
-            if b - a > 15:
-                d = savgol_filter(src[a:b], 11, 2, deriv=1, delta=1e-3)
-                vel[v] = d - sim_arr[i, j]
-        for pi, name in enumerate(PHASES):
-            msk = ph == pi
-            for v in ("y", "z", "theta"):
-                acc[name][v].append(series[v][0][msk])
-            for v in vel:
-                acc[name][v].append(vel[v][msk])
-        zr = np.abs(series["z"][0]) / data.sigma["z"] + np.abs(series["y"][0]) / data.sigma["y"]
-        k = int(np.argmax(zr))
-        if zr[k] > worst[0]:
-            worst = (float(zr[k]), (i, float(tk[k]), PHASES[ph[k]] if ph[k] >= 0 else "?"))
-    for name in PHASES:
-        table[name] = {}
-        for v in VARIABLES:
-            x = np.concatenate(acc[name][v]) if acc[name][v] else np.empty(0)
-            x = x[np.isfinite(x)]
-            table[name][v] = float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
-    ratio = {(ph, v): table[ph][v] / data.sigma[v] for ph in PHASES for v in ("y", "z", "theta")
-             if np.isfinite(table[ph][v]) and not (v == "theta" and ph in ("descent", "liftoff", "ascent"))}
-    where = max(ratio, key=ratio.get)
-    # time window: where |z residual| exceeds 3 sigma, median first/last times from apex
-    first = []
-    for series in base_sim["series"]:
-        big = np.flatnonzero(np.abs(series[where[1]][0]) > 3 * data.sigma[where[1]])
-        if big.size:
-            first.append(big[0] * 1e-3)
-    return {"table": table, "sigma": data.sigma, "where": where, "ratio": ratio[where],
-            "onset": float(np.median(first)) if first else float("nan"), "worst": worst}
-
-
-def sparse_terms(data: StrideData, sim: dict, row: int, threshold: float = 0.1) -> list[str]:
-    """Sequentially thresholded least squares of the stance residual acceleration along the leg on a
-    small library (1, rho', sign(rho'), rho - rho_0, t); returned in physical words when a term stands out."""
-    s, rec, raw = data.strides, data.rec, sim["raw"]
-    from scipy.signal import savgol_filter
-    rows, target = [], []
-    ns = len(s)
-    for i in range(ns):
-        a, b = int(s.start[i]), int(s.stop[i])
-        ph = data.phase[a:b]
-        st = (ph == 1) | (ph == 2)
-        if st.sum() < 25:
-            continue
-        tk = rec.t[a:b] - s.apex_time[i]
-        j = np.clip(np.round(tk / 1e-3).astype(int), 0, raw.y.shape[1] - 2)
-        lane = row * ns + i
-        ry = rec.y[a:b] - s.apex_y[i] - raw.y[lane, j]
-        rz = rec.z[a:b] - raw.z[lane, j]
-        ay = savgol_filter(ry, 21, 3, deriv=2, delta=1e-3)[st]
-        az = savgol_filter(rz, 21, 3, deriv=2, delta=1e-3)[st]
-        th = raw.theta[lane, j][st]
-        along = -np.sin(th) * ay + np.cos(th) * az
-        vz = savgol_filter(rec.z[a:b], 21, 3, deriv=1, delta=1e-3)[st]
-        vy = savgol_filter(rec.y[a:b], 21, 3, deriv=1, delta=1e-3)[st]
-        rhod = -np.sin(th) * vy + np.cos(th) * vz
-        rows.append(np.column_stack([np.ones_like(rhod), rhod, np.sign(rhod), tk[st] - tk[st][0]]))
-        target.append(along)
-    if not rows:
-        return []
-    X, yv = np.vstack(rows), np.concatenate(target)
-    names = ["constant force", "force proportional to rho' (extra leg damping)", "force proportional to -sign(rho') "
-             "(Coulomb friction)", "force growing with time since touchdown"]
-    scale = X.std(axis=0) + 1e-12
-    scale[0] = 1.0
-    Xs = X / scale
-    coef, *_ = np.linalg.lstsq(Xs, yv, rcond=None)
-    resid_var = np.var(yv)
-    for _ in range(5):
-        small = np.abs(coef) * np.where(np.arange(len(coef)) == 0, 1, 1) < threshold * np.sqrt(resid_var)
-        coef[small] = 0
-        big = ~small
-        if not big.any():
-            break
-        coef[big], *_ = np.linalg.lstsq(Xs[:, big], yv, rcond=None)
-    coef = coef / scale
-    explained = 1 - np.var(yv - X @ coef) / resid_var if resid_var > 0 else 0.0
-    if explained < 0.2:
-        return []
-    m = data.params.body_mass
-    words = []
-    for c, name in zip(coef, names):
-        if c:
-            words.append(f"an extra stance force along the leg, {name}: coefficient {m * c:.3g} (N, N s/m or N/s) "
-                         f"(explains {100 * explained:.0f} % of the residual acceleration along the leg)")
-    return words
+def location_line(locations: list[Location], threshold: float) -> str:
+    above = [loc for loc in locations if loc.ratio >= threshold]
+    if not above:
+        return "location: nothing above the noise level"
+    return "location: " + "; ".join(loc.words() for loc in above[:3])

@@ -1,16 +1,78 @@
-"""Markdown + PNG report of a diagnosis."""
+"""Reports of a diagnosis: markdown + PNG for a researcher, JSON for a program."""
 
 from __future__ import annotations
 
+import json
+import math
 from pathlib import Path
 
 import numpy as np
 
-from .core import PHASES
+from .core import location_line
+from .data import PHASES
 
 
 def _fmt(x):
     return "-" if x is None or not np.isfinite(x) else f"{x:.3g}"
+
+
+def _num(x):
+    return None if x is None or not math.isfinite(float(x)) else float(x)
+
+
+def _finite(value):
+    """JSON has no inf or nan: they become null."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, (np.integer, np.bool_)):
+        return value.item()
+    return value
+
+
+def verdict_entries(result: dict) -> list[dict]:
+    """The accepted effects as plain data (what --json writes under "verdict")."""
+    out = []
+    for r in result["chosen"]:
+        c = r["candidate"]
+        entry = {"name": c.name, "kind": c.kind, "family": c.family, "site": c.site,
+                 "magnitude": _num(r["magnitude"]), "unit": c.unit, "words": c.describe(r["value"]),
+                 "equation": c.equation, "held_out_trajectory_reduction": r["reduction"],
+                 "not_separable_from": [t["name"] for t in r.get("ties", [])],
+                 "to_separate": sorted({c.separate, *(t["candidate"].separate for t in r.get("ties", []))} - {""})}
+        if c.discovery is not None:
+            entry["terms"] = [{"term": key, "coefficient": coef * r["value"], "unit": unit, "words": words}
+                              for key, coef, words, unit in c.discovery.terms()]
+        out.append(entry)
+    return out
+
+
+def _location_entries(locations, threshold):
+    return [{"phase": loc.phase, "direction": loc.direction, "site": loc.site, "window": loc.window,
+             "size": loc.size, "unit": loc.unit, "over_noise": loc.ratio, "above_noise": loc.ratio >= threshold}
+            for loc in locations]
+
+
+def write_json(result: dict, path: Path) -> Path:
+    threshold = result["settings"].locate_threshold
+    entries = verdict_entries(result)
+    # held-out next-apex errors before and after each accepted effect (cumulative)
+    before = result["before"]
+    for entry, r in zip(entries, result["chosen"]):
+        entry["held_out_before"] = before
+        entry["held_out_after"] = r["errors"]
+        before = r["errors"]
+    doc = {"recording": str(result["data"].rec.source), "strides": len(result["data"].strides),
+           "verdict": entries, "summary": result["verdict"],
+           "location": _location_entries(result["location"], threshold),
+           "held_out": {"before": result["before"], "after": result["after"]},
+           "model_effects": result.get("model_effects", {})}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(_finite(doc), indent=2, allow_nan=False), encoding="utf-8")
+    return path
 
 
 def write_report(result: dict, out: Path) -> Path:
@@ -29,46 +91,52 @@ def write_report(result: dict, out: Path) -> Path:
             ax.plot(tk * 1e3, sb[v][0] * 1e3, color="tab:red", lw=0.5, alpha=0.5, label="model" if i == 0 else None)
             if result["chosen"]:
                 ax.plot(tk * 1e3, sa[v][1] * 1e3, color="tab:blue", lw=0.5, alpha=0.5,
-                        label="model + chosen effects" if i == 0 else None)
+                        label="model + accepted effects" if i == 0 else None)
     for ax, v in zip(axes, ("y", "z", "theta")):
         sig = data.sigma[v] * 1e3
         ax.axhspan(-3 * sig, 3 * sig, color="grey", alpha=0.3, label="+-3 noise std")
         ax.set_ylabel(f"{v} residual [{'mrad' if v == 'theta' else 'mm'}]")
     axes[0].legend(loc="upper left", fontsize=8)
     axes[-1].set_xlabel("time from touchdown [ms]")
-    axes[0].set_title(f"{Path(rec.source).name}: {result['verdict']}")
+    axes[0].set_title(f"{Path(rec.source).name}: {result['verdict']}"[:110], fontsize=9)
     fig.tight_layout()
     png = out / "diagnosis.png"
     fig.savefig(png, dpi=110)
     plt.close(fig)
 
-    loc = result["locate"]
-    lines = [f"# Diagnosis of {rec.source}", "", f"**Verdict: {result['verdict']}**", "",
+    threshold = result["settings"].locate_threshold
+    lines = [f"# Diagnosis of {rec.source}", "", f"**{result['verdict']}**", "",
              f"{len(s)} strides ({'labelled' if s.labelled else 'phases detected'}); noise std estimated from flight "
              f"samples: y {data.sigma['y'] * 1e3:.3f} mm, z {data.sigma['z'] * 1e3:.3f} mm, "
-             f"theta {data.sigma['theta'] * 1e3:.3f} mrad; residual correlation length {data.corr_length:.0f} samples.",
-             "", "## 1. Where the model and the recording differ", "",
-             f"Largest: **{loc['where'][1]} in {loc['where'][0]}**, RMS {loc['ratio']:.1f} x the noise; the residual "
-             f"first exceeds 3 noise std at a median {loc['onset'] * 1e3:.0f} ms after the apex.", "",
-             "RMS residual per phase (model as given; m, m/s, rad):", "",
-             "| phase | y | z | y' | z' | theta |", "|---|---|---|---|---|---|"]
-    for ph in PHASES:
-        row = loc["table"][ph]
-        lines.append(f"| {ph} | " + " | ".join(_fmt(row[v]) for v in ("y", "z", "ydot", "zdot", "theta")) + " |")
-    lines += ["", "## 2. Candidate effects (held-out ranking)", ""]
+             f"theta {data.sigma['theta'] * 1e3:.3f} mrad.", "",
+             "## 1. Where the model and the recording differ", "",
+             location_line(result["location"], threshold), "",
+             "Residual forces at the measured state (recording minus model, the smoothing's bias removed with a "
+             "clean twin of the recording made by the model), against what noise alone produces (a noisy twin):", "",
+             "| phase | direction | window | size | over noise |", "|---|---|---|---|---|"]
+    for loc in result["location"]:
+        lines.append(f"| {loc.phase} | {loc.direction} | {loc.window} | {loc.size:+.3g} {loc.unit} | {loc.ratio:.1f} |")
+    lines += ["", "## 2. Candidates (held-out ranking)", ""]
     for k, ranking in enumerate(result["rounds"]):
-        lines += [f"Round {k + 1}" + (" (on top of the effects chosen before)" if k else "") + ":", "",
-                  "| candidate | fitted magnitude | held-out SSE reduction | t over strides | CV dBIC | significant |",
-                  "|---|---|---|---|---|---|"]
-        for r in ranking:
+        lines += [f"Round {k + 1}" + (" (on top of the effects accepted before)" if k else "") + ":", "",
+                  "| candidate | kind | fitted magnitude | held-out SSE reduction | t | held-out E_p/E_v/E_t % | verdict |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in ranking[:12]:
             c = r["candidate"]
-            lines.append(f"| {c.name} ({c.words}) | {r['magnitude']:.4g} {c.unit} | {100 * r['reduction']:.1f} % | "
-                         f"{r['t']:.1f} | {r['delta_bic']:.1f} | {'yes' if r['significant'] else 'no'} |")
+            e = r["errors"]
+            mag = c.describe(r["value"]) if c.kind == "discovered" else f"{r['magnitude']:.4g} {c.unit}"
+            why = "accepted" if r["significant"] else "; ".join(r["rejected"])
+            lines.append(f"| {c.name} | {c.kind} | {mag} | {100 * r['reduction']:.1f} % | {r['t']:.1f} | "
+                         f"{e['E_p']:.2f}/{e['E_v']:.2f}/{e['E_t']:.2f} | {why} |")
         lines.append("")
-    if result["sparse"]:
-        lines += ["Sparse regression of the remaining stance residual acceleration (fall-back):", ""]
-        lines += [f"- {w}" for w in result["sparse"]] + [""]
-    lines += ["## 3. Model with the chosen effects", "", "RMS residual per phase before -> after (y, z, theta):", "",
+    for entry in verdict_entries(result):
+        lines += [f"**{entry['name']}** ({entry['kind']}, {entry['site']}): {entry['words']}"
+                  + (f"; law {entry['equation']}" if entry["equation"] else "")]
+        if entry["not_separable_from"]:
+            lines += [f"Not separable on this data from {', '.join(entry['not_separable_from'])}; to separate them: "
+                      + "; ".join(entry["to_separate"]) + "."]
+        lines.append("")
+    lines += ["## 3. The model with the accepted effects", "", "RMS residual per phase before -> after (m, m, rad):", "",
               "| phase | y | z | theta |", "|---|---|---|---|"]
     for ph in PHASES:
         b, a = result["before_phase"][ph], result["after_phase"][ph]
@@ -77,7 +145,8 @@ def write_report(result: dict, out: Path) -> Path:
     lines += ["", "Held-out next-apex errors (magnitudes fitted without the stride's fold):", "",
               "| | E_p % | E_v % | E_t % |", "|---|---|---|---|",
               f"| model | {bf['E_p']:.3f} | {bf['E_v']:.3f} | {bf['E_t']:.3f} |",
-              f"| model + chosen | {af['E_p']:.3f} | {af['E_v']:.3f} | {af['E_t']:.3f} |", "",
+              f"| model + accepted | {af['E_p']:.3f} | {af['E_v']:.3f} | {af['E_t']:.3f} |", "",
+              "After the accepted effects: " + location_line(result["residual_location"], threshold), "",
               "![residuals](diagnosis.png)", ""]
     md = out / "diagnosis.md"
     md.write_text("\n".join(lines), encoding="utf-8")

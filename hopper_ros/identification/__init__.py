@@ -6,6 +6,8 @@ bag's messages are decoded (rclpy's CDR deserializer).
 - `strides`     apex-to-apex strides, phases, inputs from the kinematics (section 4.1)
 - `cost`        E_p, E_v, E_t (4.1)-(4.3) of recorded strides and the cost C (4.4)
 - `fit`         Nelder-Mead identification with the AAS, the corrected AAS or the exact model
+- `lanesfit`    identification with library effects: the laws re-simulate the strides (physics.lanes),
+                least squares, the folds' lanes calls batched (`hopper identify --effects`)
 - `crossval`    k-fold cross-validation, Table 4.1 and Table 4.2
 - `identifiability`  what apex-to-apex data can identify, structurally and in numbers
 - `grf`         ground reaction forces from kinematics and force plate, virtual footfalls (4.4)

@@ -17,7 +17,7 @@ import numpy as np
 from hopper_ros.physics.params import ModelParams
 
 from .cost import StrideErrors, errors_of, predicted_outcomes
-from .fit import FitResult, fit_parameters
+from .fit import FitResult, fit_parameters, lanes_fit_result
 from .progress import ProgressBar
 from .settings import PARAMETERS, IdentificationSettings
 from .strides import Strides
@@ -60,6 +60,21 @@ class CrossValidation:
     def mean_params(self) -> ModelParams:
         return ModelParams(**{name: mean for name, (mean, _) in self.parameter_table().items()})
 
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """The library effects fitted with the model ("lanes" only)."""
+        return tuple(self.folds[0].fit.effects) if self.folds else ()
+
+    def effect_table(self) -> dict[str, tuple[float, float]]:
+        """Effect -> (mean, std over folds) of its physical magnitude (averaged in search units: 1/value for a limit)."""
+        from .lanesfit import mean_magnitudes
+
+        return mean_magnitudes([f.fit.effects for f in self.folds])
+
+    def mean_effects(self) -> dict[str, float]:
+        """{effect: mean physical magnitude}: what the identified model file carries under `effects:`."""
+        return {name: mean for name, (mean, _) in self.effect_table().items()}
+
     def error_table(self) -> dict[str, dict[str, tuple[float, float]]]:
         """Table 4.2: {"test"|"train": {"E_p"|"E_v"|"E_t": (mean, std over folds)}}."""
         out = {}
@@ -93,6 +108,8 @@ def cross_validate(strides: Strides, settings: IdentificationSettings, method: s
     started = time.perf_counter()
     parts = fold_indices(len(strides), settings.folds, settings.seed)
     bar = ProgressBar(len(parts), f"{method} {settings.folds}-fold CV", stream=stream) if show_progress else None
+    if method == "lanes":
+        return _cross_validate_lanes(strides, settings, parts, bar, started)
     folds = []
     for k, test in enumerate(parts):
         train = np.setdiff1d(np.arange(len(strides)), test)
@@ -113,6 +130,28 @@ def cross_validate(strides: Strides, settings: IdentificationSettings, method: s
     return CrossValidation(fit.method, strides, folds, settings.fitted, time.perf_counter() - started)
 
 
+def _cross_validate_lanes(strides: Strides, settings: IdentificationSettings, parts, bar, started) -> CrossValidation:
+    """The folds' fits side by side, sharing their lanes calls; the held-out folds in one more call."""
+    from .lanesfit import errors_many, fit_lanes_many
+
+    trains = [np.setdiff1d(np.arange(len(strides)), test) for test in parts]
+    progress = None
+    if bar is not None:
+        def progress(k, calls, cost):
+            bar.note(f"fold {k + 1}: {calls} lanes calls, C = {cost:.4f} %")
+    fits = fit_lanes_many([strides.subset(train) for train in trains], settings, progress)
+    tests = errors_many([(f.params, f.effects, strides.subset(test)) for f, test in zip(fits, parts)], settings)
+    folds = []
+    for k, (train, test, fit, test_errors) in enumerate(zip(trains, parts, fits, tests)):
+        result = lanes_fit_result(fit, settings)
+        folds.append(Fold(train, test, result, result.errors, test_errors))
+        if bar is not None:
+            bar.step(f"fold {k + 1}: train C = {result.cost:.4f} %, test C = {test_errors.cost():.4f} %")
+    if bar is not None:
+        bar.close()
+    return CrossValidation("lanes", strides, folds, settings.fitted, time.perf_counter() - started)
+
+
 def format_parameter_table(cv: CrossValidation, truth: ModelParams | None = None) -> str:
     """Table 4.1 as markdown (with the true values and errors when known)."""
     table = cv.parameter_table()
@@ -128,6 +167,16 @@ def format_parameter_table(cv: CrossValidation, truth: ModelParams | None = None
             true = getattr(truth, name)
             row += [_number(true), f"{100.0 * (mean / true - 1.0):+.2f}" if true else "-"]
         lines.append("| " + " | ".join(row) + " |")
+    if cv.effects:
+        from hopper_ros.physics.effects import get
+
+        for name, (mean, std) in cv.effect_table().items():
+            effect = get(name)
+            row = [effect.primary.name, f"effect {name}: {effect.words}", _number(mean), f"±{_number(std)}",
+                   effect.primary.unit or "1", "yes"]
+            if truth is not None:
+                row += ["-", "-"]
+            lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 
 

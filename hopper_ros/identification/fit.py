@@ -7,6 +7,7 @@ the configured bounds (a point outside costs more than any inside), starts from
 fresh simplex `restarts` times (Nelder-Mead can stall on a degenerate simplex).
 
 Predictors:
+- "lanes": the laws with library effects (`settings.effects`), least squares by `lanesfit`.
 - "aas", "corrected": one vectorised call predicts all strides (~0.5 ms / ~1 ms for 120).
 - "exact": the exact model costs ~3 ms a stride, 0.3 s per cost evaluation, far too much for
   thousands of evaluations. It is reached by defect correction: fit the corrected AAS, then
@@ -46,6 +47,13 @@ class FitResult:
     exact_strides: int = 0               # strides integrated by the exact model
     wall_time: float = 0.0
     stages: list = field(default_factory=list)   # (stage, cost, evaluations)
+    effects: dict = field(default_factory=dict)  # "lanes": fitted effect magnitudes {name: physical value}
+
+
+def lanes_fit_result(fit, settings: IdentificationSettings) -> FitResult:
+    """A `lanesfit.LanesFit` as a FitResult (evaluations: lanes calls, each with its Jacobian)."""
+    errors = fit.errors(settings.failed_stride_error_pct)
+    return FitResult(fit.params, errors.cost(), errors, "lanes", fit.calls, 0, fit.wall_time, fit.stages, fit.effects)
 
 
 class ParameterVector:
@@ -111,6 +119,11 @@ def fit_parameters(strides: Strides, settings: IdentificationSettings, method: s
     method = method or settings.predictor
     if len(strides) == 0:
         raise ValueError("no strides to identify the parameters on")
+    if method == "lanes":
+        from .lanesfit import fit_lanes
+
+        return lanes_fit_result(fit_lanes(strides, settings.with_changes(initial=start) if start else settings,
+                                          progress=progress), settings)
     started = time.perf_counter()
     start = start or settings.initial
     vector = ParameterVector(settings.fitted, start, settings.bounds, reference=settings.initial)
@@ -127,7 +140,7 @@ def fit_parameters(strides: Strides, settings: IdentificationSettings, method: s
         stages.append((method, errors.cost(), counter[0]))
         return FitResult(params, errors.cost(), errors, method, counter[0], 0, time.perf_counter() - started, stages)
     if method != "exact":
-        raise ValueError(f"unknown predictor {method!r}; choose aas, corrected or exact")
+        raise ValueError(f"unknown predictor {method!r}; choose aas, corrected, exact or lanes")
 
     surrogate = fit_parameters(strides, settings, "corrected", start, progress)
     params, evaluations = surrogate.params, surrogate.evaluations

@@ -18,7 +18,7 @@ from .recordings import Recording, RecordingError, load_recording
 from .settings import FITTABLE, IdentificationSettings
 from .strides import Strides, extract_strides
 
-ACCURACY_ORDER = ("exact", "corrected", "aas")   # most accurate predictor first
+ACCURACY_ORDER = ("lanes", "exact", "corrected", "aas")   # most accurate predictor first (lanes: with effects)
 
 
 @dataclass
@@ -57,7 +57,11 @@ def true_params(recording: Recording) -> ModelParams | None:
 
 def identify(source: str | os.PathLike | Recording, settings: IdentificationSettings, methods: tuple[str, ...],
              *, show_progress: bool = True, stream=None, max_strides: int | None = None) -> Identification:
-    """Extract the strides of a recording and cross-validate the identification per predictor."""
+    """Extract the strides of a recording and cross-validate the identification per predictor.
+
+    `settings.effects` (library effects) are fitted by the "lanes" predictor only; they imply it."""
+    if settings.effects and "lanes" not in methods:
+        methods = tuple(methods) + ("lanes",)
     recording = source if isinstance(source, Recording) else load_recording(source)
     strides = extract_strides(recording, settings.initial.rest_length, settings.extraction)
     if max_strides is not None:

@@ -15,6 +15,8 @@ from .strides import ExtractionSettings
 DEFAULT_FILE = "identification.yaml"
 PARAMETERS = tuple(f.name for f in fields(ModelParams))
 FITTABLE = tuple(name for name in PARAMETERS if name != "rest_length")
+# the model library's predictors, and "lanes": the laws with library effects (physics.lanes, `lanesfit`)
+IDENTIFICATION_PREDICTORS = PREDICTORS + ("lanes",)
 
 
 @dataclass(frozen=True)
@@ -33,6 +35,21 @@ class ExactSettings:
     defect_tolerance: float = 1e-3
     polish_evaluations: int = 0
     polish_step: float = 0.005
+
+
+@dataclass(frozen=True)
+class LanesSettings:
+    """The "lanes" predictor's fit (identification with effects, `lanesfit`)."""
+
+    step: float = 5e-4              # [s] RK4 step of physics.lanes
+    duration_factor: float = 1.5    # simulated time: this times the longest recorded stride
+    fd_step: float = 1e-2           # forward-difference step (ln(parameter); share of an effect's search range)
+    max_iterations: int = 30        # least squares: evaluations (each one lanes call with its Jacobian)
+    initial_radius: float = 0.5     # first trust radius of the least squares (in ln(parameter))
+    xtol: float = 1e-3
+    ftol: float = 1e-3
+    polish_iterations: int = 0      # then L-BFGS-B iterations on C (4.4); 0: least squares only
+    batch_lanes: int = 8000         # the folds' lanes calls are batched up to this many lanes per call
 
 
 @dataclass(frozen=True)
@@ -59,6 +76,8 @@ class IdentificationSettings:
     failed_stride_error_pct: float
     extraction: ExtractionSettings
     grf: GrfSettings = GrfSettings()
+    lanes: LanesSettings = LanesSettings()
+    effects: tuple[str, ...] = ()      # library effects fitted with the model (the "lanes" predictor only)
 
     def with_changes(self, **changes) -> "IdentificationSettings":
         out = replace(self, **changes)
@@ -88,14 +107,16 @@ def settings_from_dict(data: Mapping[str, Any], source: str = "identification se
         failed_stride_error_pct=d["failed_stride_error_pct"],
         extraction=ExtractionSettings.from_dict(d["extraction"], f"{source}: identification.extraction"),
         grf=GrfSettings(**d["grf"]),
+        lanes=LanesSettings(**d["lanes"]),
+        effects=tuple(d["effects"]),
     )
     _validate(settings, source)
     return settings
 
 
 def _validate(s: IdentificationSettings, source: str) -> None:
-    if s.predictor not in PREDICTORS:
-        raise ValueError(f"{source}: identification.predictor: {s.predictor!r} is not one of {PREDICTORS}")
+    if s.predictor not in IDENTIFICATION_PREDICTORS:
+        raise ValueError(f"{source}: identification.predictor: {s.predictor!r} is not one of {IDENTIFICATION_PREDICTORS}")
     if s.folds < 2:
         raise ValueError(f"{source}: identification.folds: must be at least 2, got {s.folds}")
     unknown = [name for name in s.fitted if name not in FITTABLE]
@@ -114,6 +135,21 @@ def _validate(s: IdentificationSettings, source: str) -> None:
             raise ValueError(f"{source}: identification.initial.{name}: {value:g} is outside its bounds [{low:g}, {high:g}]")
     if s.nelder_mead.max_evaluations < 10 or s.nelder_mead.initial_step <= 0:
         raise ValueError(f"{source}: nelder_mead needs max_evaluations >= 10 and a positive initial_step")
+    lanes = s.lanes
+    if not (0 < lanes.step <= 2e-3 and lanes.duration_factor >= 1.0 and 0 < lanes.fd_step < 0.1
+            and lanes.max_iterations >= 1 and lanes.polish_iterations >= 0 and lanes.initial_radius > 0
+            and lanes.batch_lanes >= 1):
+        raise ValueError(f"{source}: lanes needs 0 < step <= 0.002, duration_factor >= 1, 0 < fd_step < 0.1, "
+                         f"max_iterations >= 1, polish_iterations >= 0, initial_radius > 0, batch_lanes >= 1; got {lanes}")
+    if s.effects:
+        from .lanesfit import check_effects
+
+        try:
+            check_effects(s.effects, s.fitted)
+        except ValueError as exc:
+            text = str(exc)
+            raise ValueError(f"{source}: identification.{text}" if text.startswith("effects:")
+                             else f"{source}: identification.effects: {text}") from None
 
 
 def load_settings(name: str | os.PathLike = DEFAULT_FILE) -> IdentificationSettings:

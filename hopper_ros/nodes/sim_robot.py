@@ -18,7 +18,8 @@ Parameters (read only):
   mode: "realtime" (1 kHz wall clock, default) or "lockstep" (as fast as it goes, same packets)
   can: "hub" (default), "virtual:CHANNEL" or "none"; can_port: the hub's TCP port
   udp_host, udp_port: override hardware.yaml's microcontroller destination
-  enable_effects, disable_effects: effect names to switch on/off (see config/sim.yaml)
+  enable_effects, disable_effects: effects to switch on/off, by their names in the effect library
+      (hopper_ros/physics/effects.py) with config/sim.yaml's magnitudes
   apex_height, forward_speed, leg_angle: the initial throw (default: sim.yaml initial_apex)
   publish_truth, force_plate: publish sim/truth, force_plate (default true; sim/events always)
   throw_lead: throws start this long before their apex, rising, so the apex is a natural one
@@ -142,7 +143,7 @@ class SimRobotNode(Node):
         self._stamp_origin_ns = self.get_clock().now().nanoseconds
         self._wall_start = time.monotonic()
         self._thread = threading.Thread(target=self._run, name="sim-robot", daemon=True)
-        effects = [name for name in config.effects if config.enabled(name)]
+        effects = [f"{name} {value:g}" for name, value in config.enabled_effects().items()]
         self.get_logger().info(
             f"{self.mode} at {1.0 / config.period:.0f} Hz, packets to {self._udp_address[0]}:{self._udp_address[1]}, "
             f"CAN {can_setting}{f' on 127.0.0.1:{can_port}' if can_setting == 'hub' else ''}, effects on: {', '.join(effects) or 'none'}; thrown to apex "

@@ -29,7 +29,9 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from . import laws
 from .flight import apex_time, flight_state
+from .laws import ramp_torque  # noqa: F401  (the one ramp (2.32); imported from here by older code)
 from .params import ModelParams
 
 RTOL = 1e-10
@@ -146,17 +148,6 @@ class StrideResult:
         return self.liftoff.t - self.touchdown.t if self.liftoff else math.nan
 
 
-def ramp_torque(t_stance, tau_0, ramp_duration):
-    """Applied hip torque of (2.32) with the robot's sign: -tau_0 (1 - t/t_f) on [0, t_f], 0 after.
-
-    Broadcasts over arrays of times, torques and ramp durations.
-    """
-    t = np.asarray(t_stance, dtype=float)
-    t_f = np.asarray(ramp_duration, dtype=float)
-    inside = (t >= 0.0) & (t < t_f)
-    return np.where(inside, -np.asarray(tau_0) * (1.0 - t / np.where(inside, t_f, 1.0)), 0.0)
-
-
 def polar_to_cartesian_velocity(rho, theta, rho_dot, theta_dot):
     """Body velocity (y', z') from the stance polar coordinates about the toe."""
     s, c = np.sin(theta), np.cos(theta)
@@ -172,15 +163,15 @@ def cartesian_to_polar_velocity(rho, theta, ydot, zdot):
 def _stance_rhs(params: ModelParams, tau_0: float, ramp_duration: float, with_torque: bool):
     m = params.body_mass
     g = params.gravity
-    k_m = params.stiffness / m
-    d_m = params.damping / m
-    rho_0 = params.rest_length
+    law = laws.Coefficients.from_model(params)
+    leg_force, ramp = laws.leg_force, laws.ramp_torque
+    tau_0, ramp_duration = float(tau_0), float(ramp_duration)
     sin, cos = math.sin, math.cos
 
     def rhs(t, state):
         rho, theta, rho_dot, theta_dot = state
-        torque = -tau_0 * (1.0 - t / ramp_duration) if with_torque else 0.0   # (2.32), inline: scalar hot path
-        rho_ddot = rho * theta_dot * theta_dot - g * cos(theta) - k_m * (rho - rho_0) - d_m * rho_dot
+        torque = ramp(float(t), tau_0, ramp_duration) if with_torque else 0.0   # (2.32)
+        rho_ddot = rho * theta_dot * theta_dot - g * cos(theta) + leg_force(law, rho, rho_dot) / m
         theta_ddot = (g * rho * sin(theta) + torque / m - 2.0 * rho * rho_dot * theta_dot) / (rho * rho)
         return [rho_dot, theta_dot, rho_ddot, theta_ddot]
 
@@ -188,10 +179,11 @@ def _stance_rhs(params: ModelParams, tau_0: float, ramp_duration: float, with_to
 
 
 def _stance_events(params: ModelParams):
-    k, d, rho_0 = params.stiffness, params.damping, params.rest_length
+    rho_0 = params.rest_length
+    law = laws.Coefficients.from_model(params)
 
     def leg_force(t, s):  # (2.28): the leg would pull the toe off the ground
-        return k * (rho_0 - s[0]) - d * s[2]
+        return laws.leg_force(law, s[0], s[2])
 
     def full_extension(t, s):
         return s[0] - rho_0

@@ -1,4 +1,11 @@
-"""Model parameters of the extended TD-SLIP model (Table 4.1), YAML load/save, validation."""
+"""Model parameters of the extended TD-SLIP model (Table 4.1), YAML load/save, validation.
+
+A model file holds the parameters, bare or under `model:`; an identified model with library
+effects (`hopper identify --effects`) adds `effects: {name: physical magnitude}` (names of
+`physics.effects`, magnitudes in their primary parameter's unit). `load_params` returns the
+parameters of either (the controller and the estimator use the model alone); `load_model`
+returns the parameters and the effects.
+"""
 
 from __future__ import annotations
 
@@ -98,19 +105,65 @@ def validate(p: ModelParams) -> None:
 
 
 def load_params(name: str | os.PathLike = DEFAULT_FILE) -> ModelParams:
-    """Load a complete parameter set from `config/<name>` or a path."""
+    """Load a complete parameter set from `config/<name>` or a path.
+
+    A file with `effects:` (an identified model with library effects) gives its model parameters
+    here; `load_model` gives the effects too."""
     data = load_yaml(name)
     if isinstance(data, Mapping) and "model" in data:
         data = data["model"]
     return ModelParams.from_dict(data, source=str(name))
 
 
-def save_params(params: ModelParams, path: str | os.PathLike, comment: str = "") -> Path:
-    """Write a parameter set as YAML (the format `load_params` reads)."""
+def load_model(name: str | os.PathLike = DEFAULT_FILE) -> tuple[ModelParams, dict[str, float]]:
+    """(parameters, effects {name: physical magnitude}) of a model file; effects {} when it has none.
+
+    Effect names are checked against the library (`physics.effects.get`), magnitudes must be
+    numbers (not NaN; infinite only for an effect whose "off" is infinity, e.g. torque_saturation);
+    errors name the file and the key."""
+    from hopper_ros.physics import effects as library
+
+    source = str(name)
+    data = load_yaml(name)
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{source}: expected a mapping of parameter names to numbers (or `model:` and `effects:`)")
+    if "model" not in data:
+        if "effects" in data:
+            raise ValueError(f"{source}: a model file with `effects:` must hold its parameters under `model:`")
+        return ModelParams.from_dict(data, source=source), {}
+    unknown = sorted(set(data) - {"model", "effects"})
+    if unknown:
+        raise ValueError(f"{source}: unknown top-level key(s) {unknown}; a model file has `model:` and `effects:`")
+    params = ModelParams.from_dict(data["model"], source=f"{source}: model")
+    raw = data.get("effects") or {}
+    if not isinstance(raw, Mapping):
+        raise ValueError(f"{source}: effects must be a mapping of effect names to magnitudes, got {raw!r}")
+    effects: dict[str, float] = {}
+    for key, value in raw.items():
+        try:
+            effect = library.get(str(key))
+        except ValueError as exc:
+            raise ValueError(f"{source}: effects.{key}: {exc}") from None
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value):
+            raise ValueError(f"{source}: effects.{key} must be a number ({effect.primary.name} "
+                             f"[{effect.primary.unit or '1'}]), got {value!r}")
+        if math.isinf(value) and not effect.primary.inverse:
+            raise ValueError(f"{source}: effects.{key} must be finite, got {value!r}")
+        effects[str(key)] = float(value)
+    return params, effects
+
+
+def save_params(params: ModelParams, path: str | os.PathLike, comment: str = "",
+                effects: Mapping[str, float] | None = None) -> Path:
+    """Write a parameter set as YAML (the format `load_params` reads); with `effects` ({name: physical
+    magnitude}) as `model:` plus `effects:` (the format `load_model` reads)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     header = "".join(f"# {line}\n" for line in comment.splitlines())
+    document: dict[str, Any] = {"model": params.as_dict()}
+    if effects:
+        document["effects"] = {str(name): float(value) for name, value in effects.items()}
     with open(path, "w", encoding="utf-8") as handle:
         handle.write(header)
-        yaml.safe_dump({"model": params.as_dict()}, handle, sort_keys=False)
+        yaml.safe_dump(document, handle, sort_keys=False)
     return path

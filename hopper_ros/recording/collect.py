@@ -32,7 +32,7 @@ from hopper_ros.hardware.encoders import BoomKinematics, CounterUnwrapper
 from hopper_ros.hardware.motor import HipMotor
 from hopper_ros.physics.aas import predict_aas
 from hopper_ros.physics.evaluation import SUCCESS_RANGES, sample_thesis_strides
-from hopper_ros.sim.config import SimConfig
+from hopper_ros.sim.config import EFFECTS, SimConfig
 from hopper_ros.sim.robot import SimRobot
 
 from .bag import BagWriter
@@ -164,7 +164,8 @@ def collect(output: str | os.PathLike, sim_config: SimConfig, hardware, settings
     custom = {
         "hopper_ros.source": "lockstep simulated robot, single-stride experiments (section 4.1)",
         "hopper_ros.true_model": yaml.safe_dump(params.as_dict(), sort_keys=False),
-        "hopper_ros.effects": ",".join(n for n in sim_config.effects if sim_config.enabled(n)),
+        "hopper_ros.effects": ",".join(f"{name} {EFFECTS[name]}={value:g}"
+                                       for name, value in sim_config.enabled_effects().items()),
         "hopper_ros.sensors": ",".join(n for n in sim_config.sensors if sim_config.sensors[n]["enabled"]) or "none",
         "hopper_ros.collection": yaml.safe_dump(asdict(settings), sort_keys=False),
     }

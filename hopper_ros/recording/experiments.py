@@ -15,6 +15,7 @@ simulated robot's `StrideExperiment` without changing it:
 from __future__ import annotations
 
 from hopper_ros.canbus.epos2_regulator import PositionRegulator
+from hopper_ros.physics import laws
 from hopper_ros.physics.exact import Phase
 from hopper_ros.physics.flight import flight_state
 from hopper_ros.sim.experiment import Stage, StrideExperiment
@@ -43,9 +44,7 @@ class ProfiledStrideExperiment(StrideExperiment):
             return 0.0
         if self.profile == "constant":
             return -self.tau_0
-        if since_touchdown < self.ramp_duration:
-            return -self.tau_0 * (1.0 - since_touchdown / self.ramp_duration)        # (2.32)
-        return 0.0
+        return laws.ramp_torque(since_touchdown, self.tau_0, self.ramp_duration)         # (2.32)
 
     def current_demand(self, t: float) -> float:
         demand = super().current_demand(t)
@@ -79,10 +78,10 @@ def throw_before_apex(robot, apex_height: float, forward_speed: float, leg_angle
     robot.throw(apex_height, forward_speed, leg_angle, y=y_apex)
     if lead <= 0.0:
         return
-    config = robot.config
-    y, z, ydot, zdot = flight_state(-lead, y_apex, apex_height, forward_speed, 0.0, config.gravity,
-                                    config.value("flight_damping", "horizontal"), config.value("flight_damping", "vertical"))
     plant = robot.plant
+    c = plant.coefficients
+    y, z, ydot, zdot = flight_state(-lead, y_apex, apex_height, forward_speed, 0.0, float(c.gravity),
+                                    float(c.flight_damping_y), float(c.flight_damping_z))
     plant.state[0], plant.state[1], plant.state[2], plant.state[3] = y, z, ydot, zdot
     plant.phase = Phase.ASCENT          # the plant locates the apex itself
     plant.events.clear()

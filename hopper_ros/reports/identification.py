@@ -24,7 +24,8 @@ from hopper_ros.identification.identifiability import scale_invariance  # noqa: 
 from hopper_ros.physics.exact import simulate_stride  # noqa: E402
 from hopper_ros.physics.trajectory import predicted_trajectory  # noqa: E402
 
-LABELS = {"aas": "AAS (thesis's predictor)", "corrected": "corrected AAS", "exact": "exact model"}
+LABELS = {"aas": "AAS (thesis's predictor)", "corrected": "corrected AAS", "exact": "exact model",
+          "lanes": "laws with effects (lanes)"}
 THESIS_TABLE_4_2 = {"E_p": ("5.250 ±0.549", "5.163 ±0.173"), "E_v": ("5.632 ±1.372", "5.535 ±0.173"),
                     "E_t": ("2.929 ±0.849", "2.894 ±0.138")}
 FIG_STRIDE = "identification_stride.png"
@@ -59,7 +60,9 @@ def identification_markdown(result, collection=None) -> list[str]:
            f"(phases {'from the recorded labels' if strides.labelled else 'detected from the kinematics'}, "
            f"inputs {'from the stride commands' if result.recording.commands else 'from the torque profile'}); "
            f"rejected: {', '.join(f'{v} {k}' for k, v in rejected.items()) or 'none'}.", ""]
-    md += [f"Fitted by Nelder-Mead minimising (4.4): {', '.join(SYMBOLS[n] for n in settings.fitted)}; held: "
+    lanes_words = (" (the lanes predictor: least squares on the strides' signed errors, scored by (4.4))"
+                   if "lanes" in result.cross_validations else "")
+    md += [f"Fitted by Nelder-Mead minimising (4.4){lanes_words}: {', '.join(SYMBOLS[n] for n in settings.fitted)}; held: "
            + ", ".join(f"{SYMBOLS[n]} = {getattr(settings.initial, n):g} {UNITS[n]}" for n in
                        ('body_mass', 'toe_mass', 'gravity', 'stiffness', 'damping', 'flight_damping_horizontal',
                         'flight_damping_vertical', 'rest_length') if n not in settings.fitted)
@@ -75,7 +78,11 @@ def identification_markdown(result, collection=None) -> list[str]:
                format_error_table(cv), "",
                f"Wall time {cv.wall_time:.1f} s ({sum(f.fit.evaluations for f in cv.folds)} cost evaluations"
                + (f", {sum(f.fit.exact_strides for f in cv.folds)} strides integrated by the exact model"
-                  if method == "exact" else "") + ").", ""]
+                  if method == "exact" else "")
+               + (", each a lanes call with its Jacobian, the folds' calls batched together" if method == "lanes" else "")
+               + ")."
+               + (f" Library effects fitted with the model: {', '.join(cv.effects)} (least squares on the strides' "
+                  "signed errors, docs/identification.md)." if cv.effects else ""), ""]
     md += ["The thesis's Table 4.2 on the real robot (AAS): test / training E_p "
            f"{THESIS_TABLE_4_2['E_p'][0]} / {THESIS_TABLE_4_2['E_p'][1]}, E_v {THESIS_TABLE_4_2['E_v'][0]} / "
            f"{THESIS_TABLE_4_2['E_v'][1]}, E_t {THESIS_TABLE_4_2['E_t'][0]} / {THESIS_TABLE_4_2['E_t'][1]}.", ""]
@@ -180,7 +187,9 @@ def plot_stride(out: Path, result, index: int | None = None) -> Path:
     for method, cv in result.cross_validations.items():
         params = cv.mean_params()
         try:
-            if method == "exact":
+            if method == "lanes":
+                trajectory = _lanes_trajectory(params, cv.mean_effects(), inputs, result.settings)
+            elif method == "exact":
                 trajectory = simulate_stride(params, *inputs, sample_period=1e-3).trajectory
             else:
                 trajectory = predicted_trajectory(params, *inputs, method=method)
@@ -204,6 +213,24 @@ def plot_stride(out: Path, result, index: int | None = None) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _lanes_trajectory(params, effects, inputs, settings):
+    """One stride by the laws with the effects (physics.lanes), apex to next apex, for the stride figure."""
+    from types import SimpleNamespace
+
+    from hopper_ros.identification.lanesfit import with_effects
+    from hopper_ros.physics.lanes import simulate_lanes
+
+    lane = simulate_lanes(with_effects(params, effects), *(np.array([v]) for v in inputs),
+                          duration=1.5, h=settings.lanes.step, sample=1e-3)
+    end = lane.stride_time[0]
+    if not np.isfinite(end):
+        return None
+    t = np.arange(lane.y.shape[1]) * 1e-3
+    keep = t <= end
+    return SimpleNamespace(t=t[keep], y=lane.y[0][keep], z=lane.z[0][keep], ydot=lane.ydot[0][keep],
+                           zdot=lane.zdot[0][keep])
 
 
 def plot_errors(out: Path, result) -> Path:

@@ -13,6 +13,7 @@ from __future__ import annotations
 from enum import Enum
 
 from hopper_ros.canbus.epos2_regulator import PositionRegulator
+from hopper_ros.physics import laws
 from hopper_ros.physics.evaluation import sample_thesis_strides
 
 from .plant import PlantEvent
@@ -59,23 +60,20 @@ class StrideExperiment:
         if self.stage is Stage.PRE_TOUCHDOWN:
             return 0.0
         if self.stage is Stage.STANCE:   # what the current sensor reads; the plant gets the ramp in continuous time
-            since = t - plant.touchdown_time
-            ramp = -self.tau_0 * (1.0 - since / self.ramp_duration) if 0.0 <= since < self.ramp_duration else 0.0
+            ramp = laws.ramp_torque(t - plant.touchdown_time, self.tau_0, self.ramp_duration)     # (2.32)
             return self.robot.motor.current(ramp)
         motor = self.robot.motor
         return self.regulator.current(self.hold_angle, plant.leg_angle, plant.leg_rate, self.robot.period, motor)
 
     def torque_function(self, current_history, hip_torque, delay: float):
-        """Hip torque over the period: the regulator's current, or the stance ramp in continuous time."""
-        plant = self.robot.plant
+        """Commanded hip torque over the period: the regulator's current, or in stance the ramp (2.32) in
+        continuous time, `delay` late (the actuation delay)."""
+        plant, motor = self.robot.plant, self.robot.motor
         tau_0, t_f = self.tau_0, self.ramp_duration
 
         def torque(t: float) -> float:
             if plant.in_contact:
-                since = t - delay - plant.touchdown_time
-                if 0.0 <= since < t_f:
-                    return hip_torque(self.robot.motor.current(-tau_0 * (1.0 - since / t_f)))   # (2.32)
-                return 0.0
+                return hip_torque(motor.current(laws.ramp_torque(t - delay - plant.touchdown_time, tau_0, t_f)))
             return hip_torque(current_history(t))
 
         return torque

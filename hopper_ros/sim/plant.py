@@ -1,25 +1,28 @@
-"""The simulated robot's body and leg: the extended TD-SLIP dynamics plus switchable effects.
+"""The simulated robot's body and leg: the laws of `hopper_ros.physics.laws`, integrated event to event.
 
-State (SI, model coordinates: y forward, z body height above the running surface):
-body (y, z, y', z'), leg angle and rate (theta, theta'), toe depth into a compliant ground.
+State (SI, model coordinates: y forward, z body height above the model's z = 0; the running
+surface is at z = `ground_height`, 0 unless that effect is on): body (y, z, y', z'), leg angle
+and rate (theta, theta'), toe depth into a compliant ground, the torque the hip applies (the
+actuator's first-order lag state).
 
-Flight (2.8), with the leg a rigid rotor driven by the hip torque tau:
-
-    y'' = -d_h y',   z'' = -g - d_v z',   J theta'' = tau - b theta'
-
-Stance, in Cartesian form about the toe at (y_toe, -depth); with the rigid ground it is (2.9):
-
-    e_rho = (-sin theta, cos theta),  e_theta = (-cos theta, -sin theta)
-    F = k (rho_0 - rho) - d rho' - F_c tanh(rho' / v_c)           (leg force, Coulomb slide friction)
-    m y'' = F e_rho,y + (tau / rho) e_theta,y
-    m z'' = F e_rho,z + (tau / rho) e_theta,z - m g
-
-The massless leg passes F e_rho + (tau/rho) e_theta to the ground, which is the ground reaction
-force. A compliant ground holds the toe with k_g depth + d_g depth' = F_z (massless toe).
-Touchdown: toe reaches the ground, z - depth - rho_0 cos theta = 0. Lift-off: F = 0 (2.28) or
-full extension, then the collision (2.12). Every event is located inside the RK4 step by
-regula falsi, so with the extra effects off this reproduces `physics.exact` (tested).
-Equations of every effect: docs/sim.md.
+Every force law, reset map and the actuator come from `laws`, parameterised by one
+`laws.Coefficients` of floats (`SimConfig.coefficients()`: the physics plus the enabled
+effects of `hopper_ros.physics.effects`), so the plant is the same model as the vectorised
+`physics.lanes` and the exact model (tested):
+- flight: the body by `laws.flight_acceleration`; the leg is a rigid rotor driven by the hip,
+  J theta'' = tau - b theta' (the motor's inertia and friction, config/hardware.yaml);
+- stance: `laws.stance_forces` about the toe (the massless leg follows the body; compliant
+  ground, hip friction and every stance effect inside);
+- the actuator: the commanded hip torque (the robot's `torque(t)`, delayed there by the
+  actuation delay) -> `laws.actuator_torque` (gain, saturation, and in stance the offset) ->
+  in stance the first-order lag `torque_lag` as a state (in flight the drive's own position
+  loop holds the leg, which a lag of milliseconds would throw into oscillation; `physics.lanes`
+  likewise starts the actuator at touchdown);
+- touchdown when the toe at rest length meets the ground (`laws.touchdown_height`), velocity
+  reset `laws.touchdown_velocity`; lift-off when the leg force vanishes (2.28) or the leg is
+  fully extended, reset `laws.liftoff_velocity` (2.12).
+Integration: RK4, every event located inside the step by regula falsi, so with no effect on this
+reproduces `physics.exact` (tested to 1e-6).
 """
 
 from __future__ import annotations
@@ -28,17 +31,18 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
+from hopper_ros.physics import laws
 from hopper_ros.physics.exact import COLLAPSE_FRACTION, MAX_LEG_ANGLE, Phase
 from hopper_ros.physics.flight import flight_state
 
 from .config import SimConfig
 
-TorqueFunction = Callable[[float], float]
+TorqueFunction = Callable[[float], float]   # the commanded hip torque [N m] at time t
 EVENT_TIME_TOLERANCE = 1e-10  # [s]
 _ROOT_ITERATIONS = 60
 
 # state vector layout
-Y, Z, YDOT, ZDOT, THETA, THETA_DOT, DEPTH = range(7)
+Y, Z, YDOT, ZDOT, THETA, THETA_DOT, DEPTH, TORQUE = range(8)
 
 
 @dataclass(frozen=True)
@@ -57,37 +61,37 @@ class PlantEvent:
 class Plant:
     """Integrates the true motion one period at a time; events located inside the step."""
 
-    def __init__(self, config: SimConfig, leg_inertia: float, leg_friction: float) -> None:
+    def __init__(self, config: SimConfig, leg_inertia: float, leg_friction: float,
+                 coefficients: laws.Coefficients | None = None) -> None:
         self.config = config
-        physics = config.physics
-        self.mass = physics["body_mass"]
-        self.stiffness = physics["stiffness"]
-        self.damping = physics["damping"]
-        self.rest_length = physics["rest_length"]
-        self.gravity = config.gravity
-        self.damping_h = config.value("flight_damping", "horizontal")
-        self.damping_v = config.value("flight_damping", "vertical")
-        toe_mass = config.value("liftoff_collision", "toe_mass")
-        self.collision_factor = self.mass / (self.mass + toe_mass)                      # (2.12)
-        self.friction = config.value("leg_friction", "force")
-        self.friction_speed = config.effects["leg_friction"]["smoothing_speed"] or 1e-3
-        self.compliant = config.enabled("ground_compliance")
-        self.ground_stiffness = config.value("ground_compliance", "stiffness")
-        self.ground_damping = config.value("ground_compliance", "damping")
-        self.impact_loss = config.value("touchdown_impact", "tangential_loss")
+        self.coefficients = config.coefficients() if coefficients is None else coefficients
+        c = self.coefficients
+        self._stance_c = c
+        self._flight_c = c.replace(torque_offset=0.0)     # the offset acts in stance (effects.py)
+        self.rest_length = float(c.rest_length)
+        self.ground_height = float(c.ground_height)
+        self.compliant = float(c.ground_stiffness) > 0.0
+        self.lag = float(c.torque_lag)
         self.leg_inertia = leg_inertia
         self.leg_friction = leg_friction
+        self._actuator_key, self._actuator_target = None, 0.0
         self.h = config.period / config.substeps
         self.t = 0.0
-        self.state = [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        self.state = [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
         self.in_contact = False
         self.fallen = False
         self.held = False            # held by hand at the throw's pose until released
         self.toe_y = math.nan
         self.touchdown_time = math.nan
+        self.touchdown_angle = math.nan
         self.phase = Phase.DESCENT
         self.events: list[PlantEvent] = []
-        self.torque_now = 0.0
+        self.torque_now = 0.0        # [N m] the torque the hip applies (after the actuator)
+        self.command_now = 0.0       # [N m] the commanded hip torque (after the actuation delay)
+
+    @property
+    def gravity(self) -> float:
+        return float(self.coefficients.gravity)
 
     # ------------------------------------------------------------------ set-up
     def throw(self, apex_height: float, forward_speed: float, leg_angle: float, y: float = 0.0, t: float = 0.0,
@@ -98,16 +102,18 @@ class Plant:
         closed form (2.13)-(2.16) run backwards, so that the apex is a natural one the sensing
         sees; else it starts at the apex. With `hold` it is held there until `release()`.
         """
-        if apex_height - self.rest_length * math.cos(leg_angle) <= 0.0:
+        c = self.coefficients
+        if apex_height - laws.touchdown_height(c, leg_angle) <= 0.0:
             raise ValueError(f"apex height {apex_height} m puts the toe ({leg_angle} rad) into the ground")
         y0, z0, ydot0, zdot0 = (float(v) for v in flight_state(-lead_time, y, apex_height, forward_speed, 0.0,
-                                                               self.gravity, self.damping_h, self.damping_v))
-        if z0 - self.rest_length * math.cos(leg_angle) <= 0.0:
+                                                               float(c.gravity), float(c.flight_damping_y),
+                                                               float(c.flight_damping_z)))
+        if z0 - laws.touchdown_height(c, leg_angle) <= 0.0:
             raise ValueError(f"a lead time of {lead_time} s before apex {apex_height} m puts the toe into the ground")
         self.t = t
-        self.state = [y0, z0, ydot0, zdot0, leg_angle, 0.0, 0.0]
+        self.state = [y0, z0, ydot0, zdot0, leg_angle, 0.0, 0.0, 0.0]
         self.in_contact, self.fallen, self.held = False, False, hold
-        self.toe_y, self.touchdown_time = math.nan, math.nan
+        self.toe_y, self.touchdown_time, self.touchdown_angle = math.nan, math.nan, math.nan
         if lead_time > 0.0:
             self.phase = Phase.ASCENT
             self.events = []
@@ -120,39 +126,42 @@ class Plant:
         self.held = False
 
     # ------------------------------------------------------------------ dynamics
+    def _actuator(self, c: laws.Coefficients, command: float, s: list, lagged: bool) -> tuple[float, float]:
+        """(torque the hip applies, the lag state's rate) for a commanded torque: `laws.actuator_torque`,
+        through the first-order lag when `lagged` (the applied torque is then the state)."""
+        key = (c is self._stance_c, command)
+        if key != self._actuator_key:       # the command holds over a period in flight: evaluate it once
+            self._actuator_key, self._actuator_target = key, float(laws.actuator_torque(c, command))
+        target = self._actuator_target
+        return (s[TORQUE], (target - s[TORQUE]) / self.lag) if lagged else (target, 0.0)
+
+    def _rotor_rhs(self, t: float, s: list, torque: TorqueFunction, body: list) -> list:
+        """The leg in flight (or held, or fallen): a rotor the hip drives, J theta'' = tau - b theta'. The
+        actuator acts here without its stance-only parts (offset, lag) that the drive's position loop sees
+        through (as `physics.lanes`: the actuator's torque starts at touchdown)."""
+        tau, _ = self._actuator(self._flight_c, torque(t), s, False)
+        theta_ddot = (tau - self.leg_friction * s[THETA_DOT]) / self.leg_inertia
+        return body + [s[THETA_DOT], theta_ddot, 0.0, 0.0]
+
     def _flight_rhs(self, t: float, s: list, torque: TorqueFunction) -> list:
-        tau = torque(t)
-        return [s[YDOT], s[ZDOT], -self.damping_h * s[YDOT], -self.gravity - self.damping_v * s[ZDOT],
-                s[THETA_DOT], (tau - self.leg_friction * s[THETA_DOT]) / self.leg_inertia, 0.0]
+        ydd, zdd = laws.flight_acceleration(self._flight_c, s[Y], s[Z], s[YDOT], s[ZDOT])
+        return self._rotor_rhs(t, s, torque, [s[YDOT], s[ZDOT], float(ydd), float(zdd)])
 
     def _fallen_rhs(self, t: float, s: list, torque: TorqueFunction) -> list:
-        tau = torque(t)
-        return [0.0, 0.0, 0.0, 0.0, s[THETA_DOT], (tau - self.leg_friction * s[THETA_DOT]) / self.leg_inertia, 0.0]
+        return self._rotor_rhs(t, s, torque, [0.0, 0.0, 0.0, 0.0])
 
-    def _leg(self, t: float, s: list, torque: TorqueFunction):
-        """Stance kinematics and forces: (sin, cos, rho, rho', F, tau, depth')."""
-        dy = s[Y] - self.toe_y
-        hz = s[Z] + s[DEPTH]
-        rho = math.sqrt(dy * dy + hz * hz)
-        sin, cos = -dy / rho, hz / rho
-        tau = torque(t)
-        approach = -sin * s[YDOT] + cos * s[ZDOT]               # rho' with the toe at rest
-        friction = self.friction * math.tanh(approach / self.friction_speed) if self.friction else 0.0
-        spring = self.stiffness * (self.rest_length - rho) - friction
-        depth_rate = 0.0
-        if self.compliant:  # massless toe: k_g depth + d_g depth' = F cos - (tau/rho) sin, depth' enters rho'
-            push = (spring - self.damping * approach) * cos - tau / rho * sin
-            depth_rate = (push - self.ground_stiffness * s[DEPTH]) / (self.ground_damping + self.damping * cos * cos)
-        rho_dot = approach + cos * depth_rate
-        force = spring - self.damping * rho_dot
-        return sin, cos, rho, rho_dot, force, tau, depth_rate
+    def _stance(self, t: float, s: list, torque: TorqueFunction) -> tuple[laws.StanceForces, float]:
+        """`laws.stance_forces` at this state, and the actuator lag's rate."""
+        command = torque(t)
+        tau, lag_rate = self._actuator(self._stance_c, command, s, self.lag > 0.0)
+        forces = laws.stance_forces(self._stance_c, s[Y], s[Z], s[YDOT], s[ZDOT], s[DEPTH], self.toe_y, tau,
+                                    command=command, theta_td=self.touchdown_angle,
+                                    since_touchdown=t - self.touchdown_time, compliant=self.compliant)
+        return forces, lag_rate
 
     def _stance_rhs(self, t: float, s: list, torque: TorqueFunction) -> list:
-        sin, cos, rho, _, force, tau, depth_rate = self._leg(t, s, torque)
-        across = tau / rho
-        m = self.mass
-        return [s[YDOT], s[ZDOT], (-force * sin - across * cos) / m, (force * cos - across * sin) / m - self.gravity,
-                0.0, 0.0, depth_rate]
+        f, lag_rate = self._stance(t, s, torque)
+        return [s[YDOT], s[ZDOT], float(f.ydd), float(f.zdd), 0.0, 0.0, float(f.depth_rate), lag_rate]
 
     def _rk4(self, t: float, s: list, h: float, rhs, torque: TorqueFunction) -> list:
         k1 = rhs(t, s, torque)
@@ -166,20 +175,25 @@ class Plant:
 
     # ------------------------------------------------------------------ guards
     def _toe_height(self, t: float, s: list, torque) -> float:
-        return s[Z] - self.rest_length * math.cos(s[THETA])
+        """Height of the toe (at rest length) above the ground: touchdown at 0."""
+        return s[Z] - float(laws.touchdown_height(self._stance_c, s[THETA]))
 
     def _zdot(self, t: float, s: list, torque) -> float:
         return s[ZDOT]
 
     def _leg_force(self, t: float, s: list, torque) -> float:
-        return self._leg(t, s, torque)[4]
+        return float(self._stance(t, s, torque)[0].force)
+
+    def _leg_vector(self, s: list) -> tuple[float, float]:
+        """From the toe to the body: (y - y_toe, height above the toe)."""
+        return s[Y] - self.toe_y, s[Z] - self.ground_height + s[DEPTH]
 
     def _extension(self, t: float, s: list, torque) -> float:
-        dy, hz = s[Y] - self.toe_y, s[Z] + s[DEPTH]
+        dy, hz = self._leg_vector(s)
         return self.rest_length - math.sqrt(dy * dy + hz * hz)
 
     def _collapse(self, t: float, s: list, torque) -> float:
-        dy, hz = s[Y] - self.toe_y, s[Z] + s[DEPTH]
+        dy, hz = self._leg_vector(s)
         rho = math.sqrt(dy * dy + hz * hz)
         return min(rho - COLLAPSE_FRACTION * self.rest_length, MAX_LEG_ANGLE - abs(math.atan2(-dy, hz)))
 
@@ -190,7 +204,8 @@ class Plant:
         end = self.t + duration
         while self.t < end - 1e-12:
             self._substep(min(self.h, end - self.t), torque)
-        self.torque_now = torque(self.t)
+        self.command_now = torque(self.t)
+        self.torque_now = self.applied_torque(torque)
         return self.events[start:]
 
     def _substep(self, h: float, torque: TorqueFunction) -> None:
@@ -252,7 +267,7 @@ class Plant:
 
     def _stance_angles(self) -> None:
         s = self.state
-        dy, hz = s[Y] - self.toe_y, s[Z] + s[DEPTH]
+        dy, hz = self._leg_vector(s)
         rho2 = dy * dy + hz * hz
         s[THETA] = math.atan2(-dy, hz)
         # theta' = ((y_toe - y)' hz - (-dy)(z + depth)') / rho^2 with the toe's depth rate ignored
@@ -260,16 +275,16 @@ class Plant:
 
     def _switch(self, kind: str, torque: TorqueFunction) -> None:
         s = self.state
+        c = self._stance_c
         if kind == "touchdown":
+            s[TORQUE] = self._actuator(self._flight_c, torque(self.t), s, False)[0]   # the lag starts from here
             self.in_contact = True
             self.toe_y = s[Y] + self.rest_length * math.sin(s[THETA])
             self.touchdown_time = self.t
+            self.touchdown_angle = s[THETA]
             s[DEPTH] = 0.0
-            if self.impact_loss:  # the velocity across the leg loses a share (rotor and leg inertia)
-                sin, cos = math.sin(s[THETA]), math.cos(s[THETA])
-                across = -cos * s[YDOT] - sin * s[ZDOT]
-                s[YDOT] += self.impact_loss * across * cos
-                s[ZDOT] += self.impact_loss * across * sin
+            ydot, zdot = laws.touchdown_velocity(c, s[THETA], s[YDOT], s[ZDOT])
+            s[YDOT], s[ZDOT] = float(ydot), float(zdot)
             self.events.append(self._event("touchdown", self.t, s))
             self.phase = Phase.COMPRESSION
             self._stance_angles()
@@ -282,8 +297,8 @@ class Plant:
             self.events.append(self._event("liftoff", self.t, s))
             self.in_contact = False
             s[DEPTH] = 0.0
-            s[YDOT] *= self.collision_factor                                            # (2.12)
-            s[ZDOT] *= self.collision_factor
+            ydot, zdot = laws.liftoff_velocity(c, s[THETA], s[YDOT], s[ZDOT])           # (2.12)
+            s[YDOT], s[ZDOT] = float(ydot), float(zdot)
             self.phase = Phase.ASCENT
             if s[ZDOT] <= 0.0:
                 self._fall()
@@ -305,12 +320,22 @@ class Plant:
         return PlantEvent(kind, t, s[Y], s[Z], s[YDOT], s[ZDOT], s[THETA])
 
     # ------------------------------------------------------------------ outputs
+    def applied_torque(self, torque: TorqueFunction) -> float:
+        """The torque the hip applies now for the commanded `torque(t)` (the actuator's output)."""
+        if self.in_contact:
+            return self._actuator(self._stance_c, torque(self.t), self.state, self.lag > 0.0)[0]
+        return self._actuator(self._flight_c, torque(self.t), self.state, False)[0]
+
     def ground_reaction_force(self) -> tuple[float, float]:
         """Force of the ground on the robot (forward, vertical) [N]; zero in flight."""
         if not self.in_contact:
             return 0.0, 0.0
-        sin, cos, rho, _, force, tau, _ = self._leg(self.t, self.state, lambda t: self.torque_now)
-        across = tau / rho
+        s, applied = self.state, self.torque_now
+        f = laws.stance_forces(self._stance_c, s[Y], s[Z], s[YDOT], s[ZDOT], s[DEPTH], self.toe_y, applied,
+                               command=self.command_now, theta_td=self.touchdown_angle,
+                               since_touchdown=self.t - self.touchdown_time, compliant=self.compliant)
+        force, across = float(f.force), float(f.torque / f.rho)
+        sin, cos = float(f.sin), float(f.cos)
         return -force * sin - across * cos, force * cos - across * sin
 
     @property

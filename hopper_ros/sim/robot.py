@@ -4,8 +4,9 @@ Per period (`SimRobot.step`):
 1. the hip command for the period: from the emulated EPOS2 (`drive`, commanded over CAN by the
    motor driver: poll its frames, run its control cycle -> current demand), or from the built-in
    single-stride experiment (`experiment`, section 4.1, no CAN), or none (motor off);
-2. the plant integrates the period with that hip torque (actuation delay and torque saturation
-   applied here when on);
+2. the plant integrates the period with that hip torque: the commanded torque reaches the
+   plant `torque_delay` late (the actuation delay, through the motor current's history here),
+   and the plant's actuator (`laws.actuator_torque`, the lag) turns it into the applied torque;
 3. the sensors sample the end of the period: the three encoder counts (quantised, optional noise)
    and the motor current go into one microcontroller packet; the force plate samples the ground
    reaction force.
@@ -73,8 +74,8 @@ class SimSample:
 
 class CommandHistory:
     """The motor current, one value per period: a commanded current (current mode) reaches the
-    motor `delay` seconds late (the actuation delay effect); the drive's own position regulator
-    acts at once (it runs inside the drive, after the delay)."""
+    motor `delay` seconds late (the actuation delay effect, `laws.Coefficients.torque_delay`); the
+    drive's own position regulator acts at once (it runs inside the drive, after the delay)."""
 
     def __init__(self, delay: float) -> None:
         self.delay = delay
@@ -109,8 +110,7 @@ class SimRobot:
         # period must not halve the EPOS2's position loop): `step` advances in this many parts
         self._substeps = max(1, round(self.period / POSITION_LOOP_PERIOD)) if drive is not None else 1
         self.sequence = 0
-        self.delay = config.value("actuation_delay", "delay")
-        self.torque_limit = config.value("torque_saturation", "max_torque") or math.inf
+        self.delay = float(self.plant.coefficients.torque_delay)   # [s] command -> hip torque
         self._current = CommandHistory(self.delay)   # actual motor current: the demand, `delay` late
         self._rng = random.Random(config.seed)
         self._count_noise = config.sensor("encoder_noise", "counts")
@@ -134,9 +134,9 @@ class SimRobot:
 
     # ------------------------------------------------------------------ one period
     def hip_torque(self, current: float) -> float:
-        """Torque reaching the leg from a motor current, after the transmission's saturation."""
-        torque = self.motor.torque(current)
-        return max(-self.torque_limit, min(self.torque_limit, torque))
+        """The hip torque a motor current commands; the plant's actuator (`laws.actuator_torque`: gain,
+        offset, saturation, and the lag) makes the torque that reaches the leg of it."""
+        return self.motor.torque(current)
 
     def step(self) -> SimSample:
         """One sample period: the drive's loop periods within it, then the packet of its end."""

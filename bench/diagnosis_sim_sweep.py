@@ -1,0 +1,95 @@
+"""Every library effect, one at a time and in pairs from different phases, on the simulated robot.
+
+50 strides of section 4.1's single-stride experiments (`hopper collect`, lockstep), every sensor noise
+on, saved as a CSV without phase labels, diagnosed, scored by `diagnosis_suite.score`: named with the
+magnitude within 20 %, located at the site where it acts, nothing else named. Physics effects are
+switched on in the simulated robot (config/sim.yaml's magnitudes); a sensor fault is applied to the
+recorded channel (delay by interpolation, scale, offset). Used by test_diagnosis.py (a subset) and
+bench_diagnosis.py (the whole sweep).
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "bench"))
+sys.path.insert(0, str(REPO))
+
+from diagnosis_suite import diagnose_and_score, summarise  # noqa: E402
+
+from hopper_ros.config import load_yaml  # noqa: E402
+from hopper_ros.identification.recordings import load_csv  # noqa: E402
+from hopper_ros.physics import effects as library  # noqa: E402
+from hopper_ros.recording.collect import CollectionSettings, collect  # noqa: E402
+from hopper_ros.sim.config import SENSORS, load_sim_config  # noqa: E402
+
+SENSOR_FAULTS = {"z_delay": 0.004, "y_delay": 0.004, "theta_delay": 0.004, "z_scale": 1.03, "y_scale": 1.03,
+                 "theta_scale": 1.03, "z_offset": 0.005, "theta_offset": 0.02}
+PAIRS = (("quadratic_drag", "torque_gain"), ("touchdown_loss_along", "hip_viscous_friction"),
+         ("effective_gravity", "actuation_delay"), ("liftoff_collision", "spring_cubic"))
+STRIDES = 50
+LOCATED = {"flight": ["flight_horizontal", "flight_vertical"], "touchdown": ["touchdown_along", "touchdown_across"],
+           "stance_leg": ["stance_along", "stance_hip"], "stance_hip": ["stance_hip"], "actuator": ["stance_hip"],
+           "liftoff": ["liftoff_along", "liftoff_across"], "sensor": []}
+
+
+def cases() -> dict:
+    """name -> list of effect names (physics effects at sim.yaml's magnitudes, sensor faults above)."""
+    out = {"clean_a": [], "clean_b": []}
+    for e in library.LIBRARY:
+        out[e.name] = [e.name]
+    for name in SENSOR_FAULTS:
+        out[name] = [name]
+    for a, b in PAIRS:
+        out[f"{a}+{b}"] = [a, b]
+    return out
+
+
+def make_recording(names: list[str], folder: Path, seed: int):
+    cfg = load_sim_config().with_sensors(**{n: True for n in SENSORS})
+    physics = [n for n in names if library.get(n).kind == "physics"]
+    if physics:
+        cfg = cfg.with_effects(**{n: True for n in physics})
+    c = collect(folder / "bag", cfg, load_yaml("hardware.yaml"), CollectionSettings(strides=STRIDES, seed=seed),
+                csv_path=folder / "run.csv")
+    rec = load_csv(c.csv)
+    truth = {"effects": []}
+    enabled = cfg.enabled_effects()
+    for n in names:
+        e = library.get(n)
+        if e.kind == "sensor":
+            value = SENSOR_FAULTS[n]
+            channel, op = n.split("_")
+            x = getattr(rec, channel)
+            if op == "delay":
+                x = np.interp(rec.t - value, rec.t, x)
+            elif op == "scale":
+                x = x * value
+            else:
+                x = x + value
+            setattr(rec, channel, x)
+        else:
+            value = enabled[n]
+        truth["effects"].append({"id": n, "library": n, "magnitude": value, "site": e.site,
+                                 "located_sites": LOCATED[e.site]})
+    return rec, truth
+
+
+def run(names=None, verbose=True) -> dict:
+    rows = []
+    for k, (name, effects) in enumerate(cases().items()):
+        if names and name not in names:
+            continue
+        rec, truth = make_recording(effects, Path(tempfile.mkdtemp()), seed=100 + k)
+        rows.append(diagnose_and_score(name, rec, truth, verbose))
+    return summarise(rows)
+
+
+if __name__ == "__main__":
+    summary = run(sys.argv[1:] or None)
+    print({k: v for k, v in summary.items() if k != "rows"})

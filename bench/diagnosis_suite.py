@@ -1,0 +1,151 @@
+"""Scores `hopper diagnose` on recordings of the independent plant (test/independent_plant/).
+
+The plant writes, beside each recording, what it concealed (its own parameterisation). This module
+says what a right answer is: for an effect a library entry models, that entry named (or reported
+as not separable from the one named) with its magnitude within 20 % once converted to the
+library's parameter; for an effect no entry models, a discovered term set at the site where it acts.
+A verdict that matches no concealed effect is a false positive. Used by test_diagnosis_independent.py
+(a subset) and bench_diagnosis.py (the whole suite).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+NOMINAL = {"d_v": 0.23, "d_h": 0.01, "k": 4696.0, "rho_0": 0.205}
+# plant effect id -> (library entry, magnitude in the entry's unit from the plant's magnitude)
+LIBRARY_MATCH = {
+    "air_drag_quadratic": ("quadratic_drag", lambda m: m),
+    "boom_bearing_coulomb": ("boom_friction_horizontal", lambda m: m),
+    "flight_damping_vertical_extra": ("flight_damping_vertical", lambda m: NOMINAL["d_v"] + m),
+    "flight_damping_horizontal_extra": ("flight_damping_horizontal", lambda m: NOMINAL["d_h"] + m),
+    "effective_gravity": ("effective_gravity", lambda m: m),
+    "boom_horizontal_inertia": ("horizontal_inertia", lambda m: m),
+    "touchdown_loss_along": ("touchdown_loss_along", lambda m: m),
+    "touchdown_loss_across": ("touchdown_loss_across", lambda m: m),
+    "stiffness_error": ("leg_stiffness", lambda m: NOMINAL["k"] + m),
+    "spring_rest_length_error": ("rest_length", lambda m: NOMINAL["rho_0"] + m),
+    "spring_cubic": ("spring_cubic", lambda m: m),
+    "leg_damping_quadratic": ("quadratic_leg_damping", lambda m: m),
+    "leg_slide_coulomb": ("leg_friction", lambda m: m),
+    "compliant_ground": ("ground_compliance", lambda m: m),
+    "actuator_gain": ("torque_gain", lambda m: m),
+    "actuator_offset": ("torque_offset", lambda m: m),
+    "actuator_delay": ("actuation_delay", lambda m: m),
+    "actuator_lag": ("actuator_lag", lambda m: m),
+    "actuator_saturation": ("torque_saturation", lambda m: m),
+    "hip_friction_viscous": ("hip_viscous_friction", lambda m: m),
+    "hip_friction_coulomb": ("hip_dry_friction", lambda m: m),
+    "liftoff_toe_mass": ("liftoff_collision", lambda m: m),
+    "ground_higher": ("ground_height", lambda m: m),
+    "sensor_delay_z": ("z_delay", lambda m: m), "sensor_delay_y": ("y_delay", lambda m: m),
+    "sensor_delay_theta": ("theta_delay", lambda m: m),
+    "sensor_scale_z": ("z_scale", lambda m: m), "sensor_scale_y": ("y_scale", lambda m: m),
+    "sensor_scale_theta": ("theta_scale", lambda m: m),
+    "sensor_offset_z": ("z_offset", lambda m: m), "sensor_offset_theta": ("theta_offset", lambda m: m),
+}
+# the plant's site -> the located / discovered sites that are right for it
+SITES = {"flight": {"flight_horizontal", "flight_vertical"}, "touchdown": {"touchdown_along", "touchdown_across"},
+         "stance_along_leg": {"stance_along", "stance_hip"}, "stance_hip": {"stance_hip"},
+         "actuator": {"stance_hip"}, "liftoff": {"liftoff_along", "liftoff_across"},
+         "sensor_z": {"flight_vertical", "flight_horizontal", "stance_along", "stance_hip", "touchdown_along",
+                      "touchdown_across", "liftoff_along", "liftoff_across"}}
+SITES["sensor_y"] = SITES["sensor_theta"] = SITES["sensor_z"]
+TOLERANCE = 0.2
+
+
+def _expected(effect: dict):
+    if "library" in effect:          # a recording of our own simulated robot names the entry itself
+        return effect["library"], float(effect["magnitude"])
+    match = LIBRARY_MATCH.get(effect["id"])
+    if match is None:
+        return None, None
+    name, convert = match
+    return name, convert(float(effect["magnitude"]))
+
+
+def score(result: dict, truth: dict, threshold: float) -> dict:
+    """Hits, misses, false positives and location hits of one diagnosis against its truth sidecar."""
+    verdicts = list(result["chosen"])
+    used = set()
+    hits, misses, located = [], [], []
+    for effect in truth["effects"]:
+        name, magnitude = _expected(effect)
+        right_sites = set(effect["located_sites"]) if "located_sites" in effect else SITES.get(effect["site"], set())
+        found = None
+        for k, r in enumerate(verdicts):
+            c = r["candidate"]
+            names = {c.name, *(t["name"] for t in r.get("ties", []))}
+            if name is not None and name in names:
+                mag = r["magnitude"] if c.name == name else next(t["magnitude"] for t in r["ties"] if t["name"] == name)
+                if abs(mag - magnitude) <= TOLERANCE * abs(magnitude):
+                    found = (k, f"{name} {mag:.4g} (true {magnitude:.4g})")
+                    break
+            if name is None and c.kind == "discovered" and c.site in right_sites:
+                found = (k, f"{c.name}: {c.describe(r['value'])}")
+                break
+        if found:
+            used.add(found[0])
+            hits.append((effect["id"], found[1]))
+        else:
+            misses.append((effect["id"], name, magnitude))
+        above = {loc.site for loc in result["location"] if loc.ratio >= threshold}
+        if effect["site"].startswith("sensor") or above & right_sites:
+            located.append(effect["id"])
+    false = [r["name"] for k, r in enumerate(verdicts) if k not in used]
+    return {"hits": hits, "misses": misses, "false_positives": false, "located": located,
+            "effects": len(truth["effects"]), "clean": not truth["effects"],
+            "physics_only": not any(e["site"].startswith("sensor") for e in truth["effects"])}
+
+
+def diagnose_and_score(name: str, recording, truth: dict, verbose: bool = True) -> dict:
+    """One recording diagnosed and scored: the row of a summary."""
+    from hopper_ros.diagnosis import diagnose_file
+    from hopper_ros.diagnosis.core import Settings, location_line
+
+    threshold = Settings().locate_threshold
+    result = diagnose_file(recording)
+    s = score(result, truth, threshold)
+    s.update(name=name, seconds=result["wall_time"], verdict=result["verdict"], before=result["before"],
+             after=result["after"], location=location_line(result["location"], threshold))
+    if verbose:
+        print(f"{name}: {len(s['hits'])}/{s['effects']} named, false {s['false_positives']}, located "
+              f"{len(s['located'])}, {s['seconds']:.0f} s | {s['verdict']} | {s['location']}", flush=True)
+    return s
+
+
+def summarise(rows: list[dict]) -> dict:
+    """Hit, false-positive and locate rates over scored rows; recordings whose held-out apex got worse."""
+    from hopper_ros.physics import effects as library
+
+    effects = sum(r["effects"] for r in rows)
+    named = sum(len(r["hits"]) for r in rows)
+    false = sum(len(r["false_positives"]) for r in rows)
+    worse = [r["name"] for r in rows if any(r["after"][k] > r["before"][k] * 1.01 + 1e-6 for k in ("E_p", "E_v", "E_t"))]
+    return {"rows": rows, "hit_rate_pct": 100.0 * named / max(effects, 1),
+            "false_positive_pct": 100.0 * false / max(named + false, 1),
+            "locate_hit_rate_pct": 100.0 * sum(len(r["located"]) for r in rows) / max(effects, 1),
+            "sensor_on_physics": sum(1 for r in rows if r["physics_only"] for f in r["false_positives"]
+                                     if f in library.EFFECTS and library.get(f).kind == "sensor"),
+            "clean_ok": all(not r["false_positives"] for r in rows if r["clean"]), "worse_after": worse,
+            "recordings": len(rows), "effects": effects}
+
+
+def run(folder: Path, names=None, verbose=True) -> dict:
+    """Diagnose every recording of `folder` (CSV + truth JSON) and sum the scores."""
+    rows = []
+    for truth_path in sorted(folder.glob("*.json")):
+        if names and truth_path.stem not in names:
+            continue
+        truth = json.loads(truth_path.read_text())
+        rows.append(diagnose_and_score(truth_path.stem, truth_path.with_suffix(".csv"), truth, verbose))
+    return summarise(rows)
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(REPO / "test"))
+    summary = run(Path(sys.argv[1]), sys.argv[2:] or None)
+    print(json.dumps({k: v for k, v in summary.items() if k != "rows"}, indent=1))

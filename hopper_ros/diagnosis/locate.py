@@ -1,0 +1,310 @@
+"""Locate a mismatch by force, not by accumulated position.
+
+For every stride the recorded positions are smoothed and differentiated (Savitzky-Golay, within
+each phase, never across an event) and the model's accelerations are evaluated at the measured
+state (`physics.laws`): what is left is the force the model lacks, in the phase's natural
+directions: horizontal/vertical in flight, along the leg and about the hip in stance. At touchdown
+and lift-off the velocity jump (polynomial fits on either side, extrapolated to the event) is
+compared with the model's reset maps. The same is done on two twins of the recording made by the
+model itself from the recorded apexes and inputs: a clean one (its residual is the smoothing's own
+bias, subtracted) and one with the recording's noise and quantisation (what noise alone produces:
+the yardstick). A site stands out when its residual, in bins over strides, is several times what
+noise produces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from hopper_ros.physics import lanes, laws
+
+from .data import StrideData
+from .simulate import Variant
+
+FLIGHT_WINDOW = 71     # samples of the Savitzky-Golay fit in flight
+STANCE_WINDOW = 19     # ... in stance
+EDGE = 3               # samples dropped next to an event
+JUMP_SKIP = 2          # samples skipped next to an event for the velocity fits
+JUMP_FLIGHT = 30       # samples of the flight side's quadratic fit
+JUMP_STANCE = 14       # samples of the stance side's cubic fit
+SITES = ("flight_horizontal", "flight_vertical", "stance_along", "stance_hip", "touchdown_along",
+         "touchdown_across", "liftoff_along", "liftoff_across")
+SITE_WORDS = {"flight_horizontal": ("flight", "horizontal"), "flight_vertical": ("flight", "vertical"),
+              "stance_along": ("stance", "along the leg"), "stance_hip": ("stance", "about the hip"),
+              "touchdown_along": ("touchdown", "along the leg"), "touchdown_across": ("touchdown", "across the leg"),
+              "liftoff_along": ("lift-off", "along the leg"), "liftoff_across": ("lift-off", "across the leg")}
+BINS = {"flight_horizontal": ("descent", "ascent"), "flight_vertical": ("descent", "ascent"),
+        "stance_along": ("early stance", "mid stance", "late stance"),
+        "stance_hip": ("early stance", "mid stance", "late stance"),
+        "touchdown_along": ("at touchdown",), "touchdown_across": ("at touchdown",),
+        "liftoff_along": ("at lift-off",), "liftoff_across": ("at lift-off",)}
+UNITS = {"flight_horizontal": "N", "flight_vertical": "N", "stance_along": "N", "stance_hip": "N m",
+         "touchdown_along": "m/s", "touchdown_across": "m/s", "liftoff_along": "m/s", "liftoff_across": "m/s"}
+
+
+@dataclass
+class StrideResiduals:
+    """One stride's residuals per site: samples (values and their context) and per-bin means."""
+
+    samples: dict = field(default_factory=dict)    # site -> (values, context dict of arrays, normalised time)
+    bins: dict = field(default_factory=dict)       # site -> array of bin means (nan when missing)
+
+
+def _crossings(t, g):
+    """(touchdown, lift-off) times: the first down-crossing of g = z - rho_0 cos(theta), the next up-crossing."""
+    below = g <= 0
+    down = np.flatnonzero(~below[:-1] & below[1:])
+    if down.size == 0:
+        return None
+    i = int(down[0])
+    td = t[i] + (t[i + 1] - t[i]) * g[i] / (g[i] - g[i + 1])
+    up = np.flatnonzero(below[i + 1:-1] & ~below[i + 2:]) + i + 1
+    if up.size == 0:
+        return None
+    j = int(up[0])
+    lo = t[j] + (t[j + 1] - t[j]) * g[j] / (g[j] - g[j + 1])
+    return td, lo
+
+
+def _smooth(x, window, period):
+    w = min(window, len(x) - (1 - len(x) % 2))
+    if w < 7:
+        return None
+    return (savgol_filter(x, w, 3, deriv=0), savgol_filter(x, w, 3, deriv=1, delta=period),
+            savgol_filter(x, w, 3, deriv=2, delta=period))
+
+
+def _velocity_at(t, x, t_event, degree):
+    if len(t) < degree + 3:
+        return np.nan
+    poly = np.polyfit(t - t_event, x, degree)
+    return poly[-2]
+
+
+def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients) -> StrideResiduals | None:
+    """Residual forces of one stride (t from its apex) under the model `c` (floats)."""
+    period = float(np.median(np.diff(t)))
+    events = _crossings(t, z - c.rest_length * np.cos(theta))
+    if events is None:
+        return None
+    td, lo = events
+    out = StrideResiduals()
+    m = float(c.mass)
+    i_td = int(np.searchsorted(t, td))
+    i_lo = int(np.searchsorted(t, lo))
+    # ---- flight
+    fh, fv, ctx_parts, u_parts, bins_h, bins_v = [], [], [], [], [], []
+    for name, (a, b) in (("descent", (0, i_td)), ("ascent", (i_lo, len(t)))):
+        sm_y, sm_z = _smooth(y[a:b], FLIGHT_WINDOW, period), _smooth(z[a:b], FLIGHT_WINDOW, period)
+        if sm_y is None or sm_z is None or b - a <= 2 * EDGE + 5:
+            bins_h.append(np.nan)
+            bins_v.append(np.nan)
+            continue
+        keep = slice(EDGE, b - a - EDGE)
+        yy, vy, ay = (v[keep] for v in sm_y)
+        zz, vz, az = (v[keep] for v in sm_z)
+        my, mz = laws.flight_acceleration(c, yy, zz, vy, vz)
+        rh, rv = m * (ay - my), m * (az - mz)
+        fh.append(rh)
+        fv.append(rv)
+        bins_h.append(float(np.mean(rh)))
+        bins_v.append(float(np.mean(rv)))
+        ctx_parts.append({"y": yy, "z": zz, "ydot": vy, "zdot": vz})
+        tt = t[a:b][keep]
+        u_parts.append((tt - tt[0]) / max(tt[-1] - tt[0], 1e-9) + (0 if name == "descent" else 2))
+    if fh:
+        ctx = {k: np.concatenate([p[k] for p in ctx_parts]) for k in ctx_parts[0]}
+        u = np.concatenate(u_parts)
+        out.samples["flight_horizontal"] = (np.concatenate(fh), ctx, u)
+        out.samples["flight_vertical"] = (np.concatenate(fv), ctx, u)
+    out.bins["flight_horizontal"] = np.array(bins_h)
+    out.bins["flight_vertical"] = np.array(bins_v)
+    # ---- stance
+    a, b = i_td, i_lo
+    toe_y = np.nan
+    if b - a > 2 * EDGE + 9:
+        toe_y = float(np.median(y[a:b] + z[a:b] * np.tan(theta[a:b])))
+        sm_y, sm_z = _smooth(y[a:b], STANCE_WINDOW, period), _smooth(z[a:b], STANCE_WINDOW, period)
+        if sm_y is not None and sm_z is not None:
+            keep = slice(EDGE, b - a - EDGE)
+            yy, vy, ay = (v[keep] for v in sm_y)
+            zz, vz, az = (v[keep] for v in sm_z)
+            tt = t[a:b][keep]
+            since = tt - td
+            command = laws.ramp_torque(since - float(c.torque_delay), tau_0, t_f)
+            applied = laws.actuator_torque(c, command)
+            f = laws.stance_forces(c, yy, zz, vy, vz, 0.0, toe_y, applied, command=command, theta_td=theta_td,
+                                   since_touchdown=since)
+            ry, rz = m * (ay - f.ydd), m * (az - f.zdd)
+            ry = ry * (1.0 + float(c.horizontal_mass_ratio))
+            along = -f.sin * ry + f.cos * rz
+            across = -f.cos * ry - f.sin * rz
+            hip = across * f.rho
+            th = np.arctan2(-(yy - toe_y), zz)
+            thd = (-vy * zz + (yy - toe_y) * vz) / (f.rho * f.rho)
+            ctx = {"rho": f.rho, "rho_dot": -f.sin * vy + f.cos * vz, "theta": th, "theta_dot": thd,
+                   "theta_td": np.full_like(th, theta_td), "since_touchdown": since, "torque": applied,
+                   "command": command, "rest_length": float(c.rest_length)}
+            u = (tt - td) / max(lo - td, 1e-9) + 1.0
+            out.samples["stance_along"] = (along, ctx, u)
+            out.samples["stance_hip"] = (hip, ctx, u)
+            thirds = np.array_split(np.arange(len(along)), 3)
+            out.bins["stance_along"] = np.array([np.mean(along[k]) if len(k) else np.nan for k in thirds])
+            out.bins["stance_hip"] = np.array([np.mean(hip[k]) if len(k) else np.nan for k in thirds])
+    for site in ("stance_along", "stance_hip"):
+        out.bins.setdefault(site, np.full(3, np.nan))
+    # ---- events: velocity jumps
+    for event, t_ev, before, after in (("touchdown", td, (JUMP_FLIGHT, 2), (JUMP_STANCE, 3)),
+                                       ("liftoff", lo, (JUMP_STANCE, 3), (JUMP_FLIGHT, 2))):
+        pre = (t >= t_ev - (before[0] + JUMP_SKIP) * period) & (t <= t_ev - JUMP_SKIP * period)
+        post = (t >= t_ev + JUMP_SKIP * period) & (t <= t_ev + (after[0] + JUMP_SKIP) * period)
+        if event == "touchdown":
+            post &= t < lo
+        else:
+            pre &= t > td
+        if pre.sum() < before[0] * 0.7 or post.sum() < after[0] * 0.7:
+            out.bins[f"{event}_along"] = out.bins[f"{event}_across"] = np.array([np.nan])
+            continue
+        v_pre = np.array([_velocity_at(t[pre], x[pre], t_ev, before[1]) for x in (y, z)])
+        v_post = np.array([_velocity_at(t[post], x[post], t_ev, after[1]) for x in (y, z)])
+        if event == "touchdown":
+            ang = theta_td
+            model = np.array(laws.touchdown_velocity(c, ang, v_pre[0], v_pre[1]), dtype=float)
+        else:
+            ang = float(np.arctan2(-(y[pre][-1] - toe_y), z[pre][-1])) if np.isfinite(toe_y) else theta_td
+            model = np.array(laws.liftoff_velocity(c, ang, v_pre[0], v_pre[1]), dtype=float)
+        d = v_post - model
+        s_, c_ = np.sin(ang), np.cos(ang)
+        along, across = -s_ * d[0] + c_ * d[1], -c_ * d[0] - s_ * d[1]
+        pa, pc = -s_ * v_pre[0] + c_ * v_pre[1], -c_ * v_pre[0] - s_ * v_pre[1]
+        ctx = {"along": np.array([pa]), "across": np.array([pc])}
+        out.samples[f"{event}_along"] = (np.array([along]), ctx, np.array([0.0]))
+        out.samples[f"{event}_across"] = (np.array([across]), ctx, np.array([0.0]))
+        out.bins[f"{event}_along"] = np.array([along])
+        out.bins[f"{event}_across"] = np.array([across])
+    return out
+
+
+def _stride_coefficients(variant: Variant) -> laws.Coefficients:
+    return variant.coefficients
+
+
+def twins(data: StrideData, variant: Variant, seed: int = 0):
+    """The model's own versions of the recorded strides: (clean, noisy) lists of (t, y, z, theta) per stride,
+    t from the apex, with the recording's sensor noise and quantisation on the noisy one."""
+    s = data.strides
+    res = lanes.simulate_lanes(lanes.broadcast(variant.coefficients, len(s)), s.apex_height, s.forward_speed,
+                               s.touchdown_angle, s.tau_0, s.ramp_duration, duration=data.duration + 0.02)
+    rng = np.random.default_rng(seed)
+    clean, noisy = [], []
+    for i in range(len(s)):
+        end = res.stride_time[i]
+        if not np.isfinite(end):
+            clean.append(None)
+            noisy.append(None)
+            continue
+        n = int(np.floor(end / 1e-3)) + 1
+        t = np.arange(n) * 1e-3
+        chans = [res.y[i, :n].astype(float), res.z[i, :n].astype(float), res.theta[i, :n].astype(float)]
+        clean_ch, noisy_ch = [], []
+        for name, x in zip(("y", "z", "theta"), chans):
+            q = data.quantum[name]
+            extra = max(data.sigma[name] ** 2 - q * q / 12.0, 0.0) ** 0.5
+            xn = x + rng.normal(0.0, extra, size=x.shape)
+            if q > 0:
+                clean_ch.append(np.round(x / q) * q)
+                noisy_ch.append(np.round(xn / q) * q)
+            else:
+                clean_ch.append(x)
+                noisy_ch.append(xn)
+        clean.append((t, *clean_ch))
+        noisy.append((t, *noisy_ch))
+    return clean, noisy
+
+
+def _recorded(data: StrideData):
+    s, rec = data.strides, data.rec
+    out = []
+    for i in range(len(s)):
+        a, b = int(s.start[i]), int(s.stop[i])
+        out.append((rec.t[a:b] - s.apex_time[i], rec.y[a:b], rec.z[a:b], rec.theta[a:b]))
+    return out
+
+
+def residual_sets(data: StrideData, variant: Variant):
+    """Residuals of the recording and of its clean and noisy twins under `variant` (lists per stride)."""
+    s = data.strides
+    c = variant.coefficients
+    clean, noisy = twins(data, variant)
+    result = []
+    for series in (_recorded(data), clean, noisy):
+        rows = []
+        for i, item in enumerate(series):
+            if item is None:
+                rows.append(None)
+                continue
+            t, y, z, th = item
+            rows.append(stride_residuals(t, y, z, th, float(s.touchdown_angle[i]), float(s.tau_0[i]),
+                                         float(s.ramp_duration[i]), c))
+        result.append(rows)
+    return result
+
+
+@dataclass
+class Location:
+    site: str
+    ratio: float          # residual over what noise alone produces (1 = nothing)
+    window: str           # the bin where the residual is largest
+    size: float           # its mean over strides, bias corrected, in `unit`
+    unit: str
+    strides: int
+
+    @property
+    def phase(self) -> str:
+        return SITE_WORDS[self.site][0]
+
+    @property
+    def direction(self) -> str:
+        return SITE_WORDS[self.site][1]
+
+    def words(self) -> str:
+        return (f"{self.phase}, {self.direction}, {self.window}: {self.size:+.3g} {self.unit} "
+                f"({self.ratio:.1f} x the noise level)")
+
+
+def locate(data: StrideData, variant: Variant) -> tuple[list[Location], tuple]:
+    """Every site with its residual over the noise level, largest first; and the residual sets for discovery."""
+    rec, clean, noisy = sets = residual_sets(data, variant)
+    found = []
+    for site in SITES:
+        R, B, N = [], [], []
+        for r, c0, n1 in zip(rec, clean, noisy):
+            if r is None or c0 is None or n1 is None:
+                continue
+            R.append(r.bins.get(site))
+            B.append(c0.bins.get(site))
+            N.append(n1.bins.get(site))
+        if not R:
+            continue
+        R, B, N = np.array(R, float), np.array(B, float), np.array(N, float)
+        ok = np.isfinite(R) & np.isfinite(B) & np.isfinite(N)
+        if ok.sum() < 5:
+            continue
+        signal = np.where(ok, R - B, np.nan)
+        null = np.where(ok, N - B, np.nan)
+        noise_rms = float(np.sqrt(np.nanmean(null ** 2)))
+        rms = float(np.sqrt(np.nanmean(signal ** 2)))
+        means = np.nanmean(signal, axis=0)
+        counts = ok.sum(axis=0)
+        null_sd = np.nanstd(null, axis=0) / np.sqrt(np.maximum(counts, 1))
+        # size over noise: the RMS ratio, or the bias of the best bin in units of its standard error
+        k = int(np.nanargmax(np.abs(means) / np.maximum(null_sd, 1e-12)))
+        t_bias = float(abs(means[k]) / max(null_sd[k], 1e-12)) / 3.0
+        ratio = max(rms / max(noise_rms, 1e-12), t_bias)
+        found.append(Location(site, ratio, BINS[site][k] if k < len(BINS[site]) else "", float(means[k]),
+                              UNITS[site], int(ok.any(axis=1).sum())))
+    found.sort(key=lambda loc: -loc.ratio)
+    return found, sets

@@ -1,0 +1,411 @@
+"""The laws of the extended TD-SLIP model and of every effect it can be extended with, written once.
+
+Every integrator of the package builds its dynamics from these functions: the simulated robot's
+plant (`hopper_ros.sim.plant`, scalars), the vectorised re-simulation of recorded strides
+(`hopper_ros.physics.lanes`, numpy arrays of lanes) used by identification and diagnosis, and the
+exact model's stance (`hopper_ros.physics.exact`, the leg force and the ramp). The functions
+broadcast: the same code runs on floats and on arrays.
+
+A law is parameterised by `Coefficients`: the model's own (Table 4.1) and one coefficient per
+physical mechanism the model leaves out, each with a value that switches it off (0, or 1 for a
+gain, inf for a limit). The named, documented effects of `hopper_ros.physics.effects` set these
+coefficients; the mismatch tool's discovered terms set the `*_terms` coefficients, sums of
+`coefficient x term(state)` over the term libraries below (docs/diagnosis.md derives each).
+
+Sites: flight accelerations; the touchdown velocity reset; the stance force along the leg; the
+torque about the hip in stance; the actuator between the commanded and the applied hip torque;
+the lift-off velocity reset (2.12). Sensors are applied where a recording is compared.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+SMOOTH_SPEED = 0.005   # [m/s] or [rad/s]: speed below which a dry friction law is smoothed, tanh(v / v_s)
+
+
+def ramp_torque(t_stance, tau_0, ramp_duration):
+    """Applied hip torque of (2.32) with the robot's sign: -tau_0 (1 - t/t_f) on [0, t_f), 0 otherwise.
+
+    Broadcasts over arrays of times (from touchdown), torques and ramp durations; the one ramp
+    of the package.
+    """
+    if isinstance(t_stance, float) and isinstance(tau_0, float) and isinstance(ramp_duration, float):
+        return -tau_0 * (1.0 - t_stance / ramp_duration) if 0.0 <= t_stance < ramp_duration else 0.0
+    t = np.asarray(t_stance, dtype=float)
+    t_f = np.asarray(ramp_duration, dtype=float)
+    inside = (t >= 0.0) & (t < t_f)
+    value = np.where(inside, -np.asarray(tau_0, dtype=float) * (1.0 - t / np.where(inside, t_f, 1.0)), 0.0)
+    return float(value) if value.ndim == 0 else value
+
+
+def smooth_sign(v, speed=SMOOTH_SPEED):
+    """sign(v), smoothed over |v| < `speed` so that dry friction integrates."""
+    if isinstance(v, float):
+        return math.tanh(v / speed)
+    return np.tanh(np.asarray(v) / speed)
+
+
+# ---------------------------------------------------------------------------- term libraries
+# Each term: (key, words for a researcher, unit of its coefficient, function of the site's context).
+# A site's extra acceleration/force/torque/velocity change is sum_i c_i term_i.
+
+FLIGHT_Y_TERMS = (
+    ("1", "a constant horizontal force", "N", lambda c: np.ones_like(c.ydot)),
+    ("ydot", "a horizontal force proportional to the forward speed (viscous drag)", "N s/m", lambda c: c.ydot),
+    ("|ydot|ydot", "a horizontal force quadratic in the forward speed (air drag)", "N s^2/m^2",
+     lambda c: np.abs(c.ydot) * c.ydot),
+    ("sign(ydot)", "a constant horizontal force against the motion (dry friction of the boom's vertical axis)", "N",
+     lambda c: smooth_sign(c.ydot)),
+    ("zdot", "a horizontal force proportional to the vertical speed", "N s/m", lambda c: c.zdot),
+)
+FLIGHT_Z_TERMS = (
+    ("1", "a constant vertical force (upward when positive)", "N", lambda c: np.ones_like(c.zdot)),
+    ("zdot", "a vertical force proportional to the vertical speed (viscous drag)", "N s/m", lambda c: c.zdot),
+    ("|zdot|zdot", "a vertical force quadratic in the vertical speed (air drag)", "N s^2/m^2",
+     lambda c: np.abs(c.zdot) * c.zdot),
+    ("sign(zdot)", "a constant vertical force against the motion (dry friction of the boom's horizontal axis)", "N",
+     lambda c: smooth_sign(c.zdot)),
+    ("z", "a vertical force proportional to the height (a spring pulling the boom)", "N/m", lambda c: c.z),
+    ("ydot", "a vertical force proportional to the forward speed", "N s/m", lambda c: c.ydot),
+)
+LEG_TERMS = (   # along the leg, positive pushing the body away from the toe
+    ("1", "a constant force along the leg", "N", lambda c: np.ones_like(c.rho)),
+    ("x", "a force proportional to the leg's compression (a stiffer spring)", "N/m", lambda c: c.compression),
+    ("x^2", "a force quadratic in the leg's compression (a progressive spring)", "N/m^2", lambda c: c.compression ** 2),
+    ("x^3", "a force cubic in the leg's compression (a hardening spring)", "N/m^3", lambda c: c.compression ** 3),
+    ("rho'", "a force proportional to the leg's extension rate (extra leg damping)", "N s/m", lambda c: -c.rho_dot),
+    ("|rho'|rho'", "a force quadratic in the leg's extension rate", "N s^2/m^2", lambda c: -np.abs(c.rho_dot) * c.rho_dot),
+    ("sign(rho')", "a constant force against the leg's sliding (dry friction in the leg)", "N",
+     lambda c: -smooth_sign(c.rho_dot)),
+    ("t", "a force growing with the time since touchdown", "N/s", lambda c: c.since_touchdown),
+    ("tau/rho", "a force along the leg proportional to the hip torque over the leg length", "1", lambda c: c.torque / c.rho),
+)
+HIP_TERMS = (   # about the hip, positive increasing theta
+    ("1", "a constant torque at the hip", "N m", lambda c: np.ones_like(c.rho)),
+    ("tau", "a torque proportional to the commanded hip torque (actuator gain)", "1", lambda c: c.command),
+    ("theta-theta_td", "a torque proportional to the leg's swing since touchdown (a torsional spring at the hip)",
+     "N m/rad", lambda c: c.theta - c.theta_td),
+    ("theta", "a torque proportional to the leg angle (a spring centring the leg)", "N m/rad", lambda c: c.theta),
+    ("theta'", "a torque proportional to the leg's angular rate (viscous friction at the hip)", "N m s/rad",
+     lambda c: -c.theta_dot),
+    ("sign(theta')", "a constant torque against the leg's rotation (dry friction at the hip)", "N m",
+     lambda c: -smooth_sign(c.theta_dot)),
+    ("t", "a torque growing with the time since touchdown", "N m/s", lambda c: c.since_touchdown),
+    ("x", "a torque proportional to the leg's compression", "N", lambda c: c.compression),
+)
+JUMP_TERMS = (  # velocity change at an event, along or across the leg, from the velocity just before it
+    ("1", "a constant velocity change", "m/s", lambda c: np.ones_like(c.along)),
+    ("v_along", "a share of the velocity along the leg", "1", lambda c: c.along),
+    ("v_across", "a share of the velocity across the leg", "1", lambda c: c.across),
+)
+TERM_LIBRARIES = {"flight_y": FLIGHT_Y_TERMS, "flight_z": FLIGHT_Z_TERMS, "leg": LEG_TERMS, "hip": HIP_TERMS,
+                  "touchdown_along": JUMP_TERMS, "touchdown_across": JUMP_TERMS,
+                  "liftoff_along": JUMP_TERMS, "liftoff_across": JUMP_TERMS}
+
+
+def _terms(name: str) -> tuple:
+    return tuple(0.0 for _ in TERM_LIBRARIES[name])
+
+
+# ---------------------------------------------------------------------------- coefficients
+
+
+@dataclass(frozen=True)
+class Coefficients:
+    """Everything the laws need, SI units. Floats for one robot, arrays (one entry per lane) for many.
+
+    The first eight are the extended TD-SLIP model (Table 4.1); every other field is off at its default.
+    """
+
+    mass: object = 2.20                     # m_b [kg]
+    stiffness: object = 4696.0              # k [N/m]
+    damping: object = 9.87                  # d [N s/m]
+    rest_length: object = 0.205             # rho_0 [m]
+    gravity: object = 11.42                 # g [m/s^2]
+    flight_damping_y: object = 0.01         # d_h^f [1/s] (2.8)
+    flight_damping_z: object = 0.23         # d_v^f [1/s] (2.8)
+    collision_factor: object = 2.20 / 2.23  # m_b / (m_b + m_t) (2.12)
+    # flight
+    quadratic_drag: object = 0.0            # c [1/m]: a = -c |v| v
+    flight_friction_y: object = 0.0         # [m/s^2] dry friction of the boom about its vertical axis
+    flight_friction_z: object = 0.0         # [m/s^2] ... about its horizontal axis
+    horizontal_mass_ratio: object = 0.0     # r: horizontal effective mass m_b (1 + r) (the boom's inertia)
+    # touchdown
+    touchdown_loss_along: object = 0.0      # share of the velocity along the leg lost at touchdown
+    touchdown_loss_across: object = 0.0     # share of the velocity across the leg lost at touchdown
+    ground_height: object = 0.0             # [m] where the toe meets the ground, above the model's z = 0
+    # stance, along the leg
+    spring_cubic: object = 0.0              # k_3 [N/m^3]: + k_3 (rho_0 - rho)^3
+    quadratic_damping: object = 0.0         # d_2 [N s^2/m^2]: - d_2 |rho'| rho'
+    leg_friction: object = 0.0              # F_c [N]: - F_c tanh(rho'/v_s)
+    ground_stiffness: object = 0.0          # k_g [N/m], 0 = rigid ground
+    ground_damping: object = 250.0          # d_g [N s/m]
+    # the hip actuator
+    torque_gain: object = 1.0               # applied / commanded
+    torque_offset: object = 0.0             # [N m] added in stance
+    torque_delay: object = 0.0              # [s] command -> torque
+    torque_lag: object = 0.0                # [s] first-order time constant
+    torque_limit: object = math.inf         # [N m] |tau| <= limit
+    hip_viscous: object = 0.0               # [N m s/rad] - b theta'
+    hip_friction: object = 0.0              # [N m] - f tanh(theta'/w_s)
+    # discovered terms (coefficients of the term libraries above)
+    flight_y_terms: tuple = field(default_factory=lambda: _terms("flight_y"))
+    flight_z_terms: tuple = field(default_factory=lambda: _terms("flight_z"))
+    leg_terms: tuple = field(default_factory=lambda: _terms("leg"))
+    hip_terms: tuple = field(default_factory=lambda: _terms("hip"))
+    touchdown_along_terms: tuple = field(default_factory=lambda: _terms("touchdown_along"))
+    touchdown_across_terms: tuple = field(default_factory=lambda: _terms("touchdown_across"))
+    liftoff_along_terms: tuple = field(default_factory=lambda: _terms("liftoff_along"))
+    liftoff_across_terms: tuple = field(default_factory=lambda: _terms("liftoff_across"))
+
+    @classmethod
+    def from_model(cls, params, **changes) -> "Coefficients":
+        """The coefficients of a `ModelParams` (the extended TD-SLIP model), extras off unless given."""
+        base = dict(mass=params.body_mass, stiffness=params.stiffness, damping=params.damping,
+                    rest_length=params.rest_length, gravity=params.gravity,
+                    flight_damping_y=params.flight_damping_horizontal,
+                    flight_damping_z=params.flight_damping_vertical, collision_factor=params.collision_factor)
+        base.update(changes)
+        return cls(**base)
+
+    def replace(self, **changes) -> "Coefficients":
+        return Coefficients(**{**self.as_dict(), **changes})
+
+    def as_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @staticmethod
+    def scalar_names() -> tuple:
+        return tuple(f.name for f in fields(Coefficients) if not f.name.endswith("_terms"))
+
+    @staticmethod
+    def term_names() -> tuple:
+        return tuple(f.name for f in fields(Coefficients) if f.name.endswith("_terms"))
+
+
+_OFF = {"torque_gain": 1.0, "torque_limit": math.inf}
+
+
+def active(c: Coefficients) -> frozenset:
+    """Names of the extra coefficients that are on in any lane (cached on the instance: the laws test it often)."""
+    cached = c.__dict__.get("_active")
+    if cached is None:
+        on = set()
+        for name in ("quadratic_drag", "flight_friction_y", "flight_friction_z", "spring_cubic", "quadratic_damping",
+                     "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness"):
+            if np.any(np.asarray(getattr(c, name)) != 0.0):
+                on.add(name)
+        for name in Coefficients.term_names():
+            if any(np.any(np.asarray(v) != 0.0) for v in getattr(c, name)):
+                on.add(name)
+        cached = frozenset(on)
+        object.__setattr__(c, "_active", cached)
+    return cached
+
+
+def _sum_terms(library, coefficients, context):
+    total = 0.0
+    for (_, _, _, term), c in zip(library, coefficients):
+        if np.ndim(c) or c != 0.0:
+            total = total + np.asarray(c) * term(context)
+    return total
+
+
+# ---------------------------------------------------------------------------- flight
+
+
+class FlightContext:
+    __slots__ = ("y", "z", "ydot", "zdot")
+
+    def __init__(self, y, z, ydot, zdot):
+        self.y, self.z, self.ydot, self.zdot = y, z, ydot, zdot
+
+
+def flight_acceleration(c: Coefficients, y, z, ydot, zdot):
+    """Body acceleration in flight (y'', z''): (2.8) y'' = -d_h y', z'' = -g - d_v z', plus the flight effects."""
+    ay = -c.flight_damping_y * ydot
+    az = -c.gravity - c.flight_damping_z * zdot
+    on = active(c)
+    if "quadratic_drag" in on:
+        speed = np.sqrt(ydot * ydot + zdot * zdot)
+        ay = ay - c.quadratic_drag * speed * ydot
+        az = az - c.quadratic_drag * speed * zdot
+    if "flight_friction_y" in on:
+        ay = ay - c.flight_friction_y * smooth_sign(ydot)
+    if "flight_friction_z" in on:
+        az = az - c.flight_friction_z * smooth_sign(zdot)
+    if "flight_y_terms" in on or "flight_z_terms" in on:
+        ctx = FlightContext(y, z, ydot, zdot)
+        ay = ay + _sum_terms(FLIGHT_Y_TERMS, c.flight_y_terms, ctx) / c.mass
+        az = az + _sum_terms(FLIGHT_Z_TERMS, c.flight_z_terms, ctx) / c.mass
+    return ay, az
+
+
+# ---------------------------------------------------------------------------- stance
+
+
+class StanceContext:
+    __slots__ = ("rho", "rho_dot", "compression", "theta", "theta_dot", "theta_td", "since_touchdown",
+                 "torque", "command")
+
+    def __init__(self, rho, rho_dot, rest_length, theta, theta_dot, theta_td, since_touchdown, torque, command):
+        self.rho, self.rho_dot, self.compression = rho, rho_dot, rest_length - rho
+        self.theta, self.theta_dot, self.theta_td = theta, theta_dot, theta_td
+        self.since_touchdown, self.torque, self.command = since_touchdown, torque, command
+
+
+def leg_force(c: Coefficients, rho, rho_dot):
+    """Spring-damper force along the leg, k (rho_0 - rho) - d rho' (2.9), zero at lift-off (2.28), plus the
+    along-the-leg effects other than the discovered terms (cubic spring, quadratic damping, dry friction)."""
+    x = c.rest_length - rho
+    force = c.stiffness * x - c.damping * rho_dot
+    on = active(c)
+    if "spring_cubic" in on:
+        force = force + c.spring_cubic * x ** 3
+    if "quadratic_damping" in on:
+        force = force - c.quadratic_damping * np.abs(rho_dot) * rho_dot
+    if "leg_friction" in on:
+        force = force - c.leg_friction * smooth_sign(rho_dot)
+    return force
+
+
+def hip_losses(c: Coefficients, theta_dot):
+    """Friction in the hip joint, -b theta' - f tanh(theta'/w_s), added to the applied torque."""
+    loss = 0.0
+    on = active(c)
+    if "hip_viscous" in on:
+        loss = loss - c.hip_viscous * theta_dot
+    if "hip_friction" in on:
+        loss = loss - c.hip_friction * smooth_sign(theta_dot)
+    return loss
+
+
+def has_terms(c: Coefficients, name: str) -> bool:
+    return name in active(c)
+
+
+@dataclass
+class StanceForces:
+    sin: object
+    cos: object
+    rho: object
+    rho_dot: object
+    force: object        # along the leg [N]
+    torque: object       # about the hip [N m], the applied torque plus hip losses and terms
+    depth_rate: object   # toe sinking rate into a compliant ground [m/s]
+    ydd: object
+    zdd: object
+
+
+def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, *, command=0.0, theta_td=0.0,
+                  since_touchdown=0.0, compliant=None) -> StanceForces:
+    """Stance dynamics (2.9) in Cartesian form about the toe at (toe_y, ground_height - depth).
+
+        e_rho = (-sin theta, cos theta),   e_theta = (-cos theta, -sin theta)
+        m y'' = (F e_rho,y + (tau/rho) e_theta,y) / (1 + r)
+        m z'' =  F e_rho,z + (tau/rho) e_theta,z - m g
+
+    F is `leg_force` plus the discovered along-the-leg terms, tau the applied torque plus `hip_losses` and
+    the discovered hip terms, r the horizontal mass ratio of the boom. A compliant ground holds the
+    massless toe with k_g depth + d_g depth' = the force's vertical component; depth' enters rho'.
+    """
+    dy = y - toe_y
+    hz = z - c.ground_height + depth
+    scalar = isinstance(dy, float) and isinstance(hz, float)
+    rho = math.sqrt(dy * dy + hz * hz) if scalar else np.sqrt(dy * dy + hz * hz)
+    sin, cos = -dy / rho, hz / rho
+    approach = -sin * ydot + cos * zdot                     # rho' with the toe at rest
+    theta = math.atan2(-dy, hz) if scalar else np.arctan2(-dy, hz)
+    theta_dot = (-ydot * hz + dy * zdot) / (rho * rho)
+    tau = torque + hip_losses(c, theta_dot)
+    extra_leg = has_terms(c, "leg_terms")
+    if has_terms(c, "hip_terms"):
+        ctx = StanceContext(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown, torque, command)
+        tau = tau + _sum_terms(HIP_TERMS, c.hip_terms, ctx)
+    spring_only = leg_force(c, rho, approach) + c.damping * approach     # the force's parts without d rho'
+    if extra_leg:
+        ctx = StanceContext(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown, tau, command)
+        spring_only = spring_only + _sum_terms(LEG_TERMS, c.leg_terms, ctx)
+    depth_rate = 0.0
+    if compliant is None:
+        compliant = np.asarray(c.ground_stiffness) > 0.0
+    if "ground_stiffness" in active(c):
+        push = (spring_only - c.damping * approach) * cos - tau / rho * sin
+        rate = (push - c.ground_stiffness * depth) / (c.ground_damping + c.damping * cos * cos)
+        depth_rate = (rate if compliant else 0.0) if scalar else np.where(compliant, rate, 0.0)
+    rho_dot = approach + cos * depth_rate
+    force = spring_only - c.damping * rho_dot
+    across = tau / rho
+    ydd = (-force * sin - across * cos) / (c.mass * (1.0 + c.horizontal_mass_ratio))
+    zdd = (force * cos - across * sin) / c.mass - c.gravity
+    return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, ydd, zdd)
+
+
+# ---------------------------------------------------------------------------- the actuator
+
+
+def actuator_torque(c: Coefficients, command):
+    """Torque the hip delivers for a commanded torque (before any lag): gain, offset, saturation.
+
+    The delay and the first-order lag act in time (the integrators: `torque_delay`, `torque_lag`).
+    """
+    tau = c.torque_gain * command + c.torque_offset
+    if isinstance(tau, float) and isinstance(c.torque_limit, float):
+        return min(max(tau, -c.torque_limit), c.torque_limit)
+    return np.clip(tau, -c.torque_limit, c.torque_limit)
+
+
+# ---------------------------------------------------------------------------- events
+
+
+class JumpContext:
+    __slots__ = ("along", "across")
+
+    def __init__(self, along, across):
+        self.along, self.across = along, across
+
+
+def _leg_components(theta, ydot, zdot):
+    sin, cos = np.sin(theta), np.cos(theta)
+    along = -sin * ydot + cos * zdot          # e_rho = (-sin, cos)
+    across = -cos * ydot - sin * zdot         # e_theta = (-cos, -sin)
+    return sin, cos, along, across
+
+
+def _from_components(sin, cos, along, across):
+    return -sin * along - cos * across, cos * along - sin * across
+
+
+def touchdown_velocity(c: Coefficients, theta, ydot, zdot):
+    """Body velocity just after touchdown at leg angle theta: the rigid model keeps it; the touchdown
+    effects remove shares along and across the leg and add the discovered jump terms."""
+    sin, cos, along, across = _leg_components(theta, ydot, zdot)
+    ctx = JumpContext(along, across)
+    new_along = along * (1.0 - c.touchdown_loss_along)
+    new_across = across * (1.0 - c.touchdown_loss_across)
+    if has_terms(c, "touchdown_along_terms"):
+        new_along = new_along + _sum_terms(JUMP_TERMS, c.touchdown_along_terms, ctx)
+    if has_terms(c, "touchdown_across_terms"):
+        new_across = new_across + _sum_terms(JUMP_TERMS, c.touchdown_across_terms, ctx)
+    return _from_components(sin, cos, new_along, new_across)
+
+
+def liftoff_velocity(c: Coefficients, theta, ydot, zdot):
+    """Body velocity after the lift-off collision (2.12), v -> m_b/(m_b + m_t) v, plus the discovered jump terms."""
+    ydot, zdot = c.collision_factor * ydot, c.collision_factor * zdot
+    if not (has_terms(c, "liftoff_along_terms") or has_terms(c, "liftoff_across_terms")):
+        return ydot, zdot
+    sin, cos, along, across = _leg_components(theta, ydot, zdot)
+    ctx = JumpContext(along, across)
+    along = along + _sum_terms(JUMP_TERMS, c.liftoff_along_terms, ctx)
+    across = across + _sum_terms(JUMP_TERMS, c.liftoff_across_terms, ctx)
+    return _from_components(sin, cos, along, across)
+
+
+def touchdown_height(c: Coefficients, theta):
+    """Body height at which the toe, at rest length and angle theta, meets the ground."""
+    return c.ground_height + c.rest_length * np.cos(theta)

@@ -1,0 +1,68 @@
+"""The mismatch tool judged by a plant it was not built with (issue 15): test/independent_plant/ was
+written from the thesis apart from the effect library and the diagnosis engine, with its own
+equations, integrator (solve_ivp with event location), stride controller, encoders and noise; its
+logs hold the commanded torque and no phase labels. A representative subset runs here; the whole
+suite (`bench/bench_diagnosis.py`) in `make bench`."""
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from hopper_ros.diagnosis import diagnose_file
+from hopper_ros.diagnosis.core import Settings
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+from diagnosis_suite import score  # noqa: E402
+from independent_plant.suite import write_suite  # noqa: E402
+
+SUBSET = ("clean_1", "flight_air_drag", "actuator_gain", "leg_slide_coulomb", "other_flight_lift", "pair_drag_gain")
+
+
+@pytest.fixture(scope="module")
+def suite(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("independent")
+    write_suite(folder, SUBSET)
+    out = {}
+    for name in SUBSET:
+        truth = json.loads((folder / f"{name}.json").read_text())
+        result = diagnose_file(folder / f"{name}.csv", json_path=folder / f"{name}.verdict.json")
+        out[name] = (truth, result, score(result, truth, Settings().locate_threshold), folder)
+    return out
+
+
+@pytest.mark.parametrize("name", SUBSET)
+def test_every_concealed_effect_named_and_nothing_else(suite, name):
+    truth, result, s, _ = suite[name]
+    assert not s["misses"], f"{name}: missed {s['misses']}; verdict: {result['verdict']}"
+    assert not s["false_positives"], f"{name}: named what is not there {s['false_positives']}; {result['verdict']}"
+
+
+@pytest.mark.parametrize("name", SUBSET)
+def test_held_out_apex_never_worse(suite, name):
+    _, result, _, _ = suite[name]
+    for key in ("E_p", "E_v", "E_t"):
+        assert result["after"][key] <= result["before"][key] * 1.01 + 1e-6, (key, result["before"], result["after"])
+
+
+def test_located_where_the_effects_act(suite):
+    for name in SUBSET:
+        truth, result, s, _ = suite[name]
+        if truth["effects"]:
+            assert s["located"], f"{name}: not located ({[l.words() for l in result['location'][:3]]})"
+        else:
+            assert all(loc.ratio < Settings().locate_threshold for loc in result["location"]), name
+
+
+def test_json_verdict(suite):
+    truth, result, _, folder = suite["other_flight_lift"]
+    doc = json.loads((folder / "other_flight_lift.verdict.json").read_text())
+    entry = doc["verdict"][0]
+    assert entry["kind"] == "discovered" and entry["site"] == "flight_vertical"
+    assert entry["terms"] and all(t["unit"] for t in entry["terms"])
+    assert {"E_p", "E_v", "E_t"} <= set(entry["held_out_before"]) and entry["held_out_after"]["E_p"] <= \
+        entry["held_out_before"]["E_p"]
+    assert doc["location"][0]["phase"] == "flight" and doc["location"][0]["above_noise"]
+    clean = json.loads((folder / "clean_1.verdict.json").read_text())
+    assert clean["verdict"] == [] and clean["summary"] == "no significant mismatch"
