@@ -1,11 +1,23 @@
 """The process environment every hopper_ros entry point sets up before rclpy is imported.
 
-Fast DDS's default discovery multicasts to 239.255.0.1 on every interface. The hopper stack
-must stay on the machine unless a user explicitly asks for more, so every entry point (the
-`hopper` CLI, each node's `main`, the launcher for its children) calls
-`apply_ros_environment()` first: it sets `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` unless the
-user already chose a range. A range set by the user (OFF, LOCALHOST, SUBNET, SYSTEM_DEFAULT) is
-kept; a misspelt one is rejected instead of being handed to rcl. No ROS import here.
+DDS stays on this machine, and on loopback, unless a user explicitly asks for more. Every entry
+point (the `hopper` CLI, each node's `main`, the launcher for its children, the venv's start-up
+hook tools/hopper_ros_env.pth) calls `apply_ros_environment()` first. When the discovery range
+is unset, empty or LOCALHOST it installs the loopback profile (issue 17):
+
+- `FASTDDS_DEFAULT_PROFILES_FILE` = hopper_ros/dds/fastdds_loopback.xml: no built-in transports,
+  UDPv4 with the interface allowlist 127.0.0.1, shared memory, no multicast, discovery by the
+  initial peer 127.0.0.1. Every socket of a participant is on 127.0.0.1;
+- `ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT` for rcl, because rmw_fastrtps, given LOCALHOST,
+  adds a UDPv4 transport of its own that binds 0.0.0.0 and every interface's address (seen with
+  `ss -lnup`: Fast DDS then sends nothing off the machine but anyone on the network can send in);
+- `HOPPER_DDS_LOOPBACK=1`, so that children and `discovery_range()` know that SYSTEM_DEFAULT here
+  means our LOCALHOST.
+
+A range the user chose (OFF, SUBNET, SYSTEM_DEFAULT without our marker) is kept and no profile
+is installed: a wider range only when asked for. A user's own FASTDDS_DEFAULT_PROFILES_FILE is
+respected (LOCALHOST then stays rmw_fastrtps's). A misspelt range is rejected instead of being
+handed to rcl. No ROS import here.
 
 Real-time priority: `HOPPER_REALTIME_PRIORITY=N` (1-99; a launch entry's `realtime_priority`)
 makes `run_node` put the node's process on SCHED_FIFO at priority N before rclpy starts, so the
@@ -26,25 +38,48 @@ from __future__ import annotations
 
 import os
 import signal
+from pathlib import Path
 from typing import MutableMapping
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGQUIT)
 DISCOVERY_RANGE_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 REALTIME_PRIORITY_VAR = "HOPPER_REALTIME_PRIORITY"
+PROFILES_FILE_VAR = "FASTDDS_DEFAULT_PROFILES_FILE"
+LOOPBACK_VAR = "HOPPER_DDS_LOOPBACK"
 DEFAULT_DISCOVERY_RANGE = "LOCALHOST"
 # The values rcl accepts (rcl/discovery_options.h); compared exactly, as rcl does.
 VALID_DISCOVERY_RANGES = ("OFF", "LOCALHOST", "SUBNET", "SYSTEM_DEFAULT")
+#: the Fast DDS profile that keeps every socket on 127.0.0.1
+LOOPBACK_PROFILE = Path(__file__).resolve().parent / "dds" / "fastdds_loopback.xml"
+_RCL_RANGE_WITH_PROFILE = "SYSTEM_DEFAULT"   # rmw_fastrtps leaves the transports to the profile
 
 
 class RosEnvironmentError(ValueError):
     """The environment asks for something the stack refuses to run with."""
 
 
-def discovery_range(environ: MutableMapping[str, str] | None = None) -> str | None:
-    """The discovery range the environment asks for, or None when none is set."""
+def loopback_installed(environ: MutableMapping[str, str] | None = None) -> bool:
+    """True when the loopback profile is in force (installed by us, range not changed since)."""
     env = os.environ if environ is None else environ
+    return (env.get(LOOPBACK_VAR) == "1" and env.get(DISCOVERY_RANGE_VAR) == _RCL_RANGE_WITH_PROFILE
+            and bool(env.get(PROFILES_FILE_VAR)))
+
+
+def discovery_range(environ: MutableMapping[str, str] | None = None) -> str | None:
+    """The discovery range in force (LOCALHOST with our loopback profile), or None when none is set."""
+    env = os.environ if environ is None else environ
+    if loopback_installed(env):
+        return DEFAULT_DISCOVERY_RANGE
     value = env.get(DISCOVERY_RANGE_VAR, "")
     return value or None
+
+
+def dds_network(environ: MutableMapping[str, str] | None = None) -> str:
+    """Where DDS may bind and send, in words (for the nodes' start-up log line)."""
+    env = os.environ if environ is None else environ
+    if loopback_installed(env):
+        return f"LOCALHOST (every DDS socket on 127.0.0.1: {env[PROFILES_FILE_VAR]})"
+    return str(discovery_range(env) or "unset (rcl default)")
 
 
 def apply_ros_environment(environ: MutableMapping[str, str] | None = None, *, strict: bool = True) -> dict[str, str]:
@@ -57,15 +92,32 @@ def apply_ros_environment(environ: MutableMapping[str, str] | None = None, *, st
     """
     env = os.environ if environ is None else environ
     changed: dict[str, str] = {}
-    current = discovery_range(env)
-    if current is None:
-        env[DISCOVERY_RANGE_VAR] = DEFAULT_DISCOVERY_RANGE
-        changed[DISCOVERY_RANGE_VAR] = DEFAULT_DISCOVERY_RANGE
-    elif strict and current not in VALID_DISCOVERY_RANGES:
+    if loopback_installed(env):
+        return changed
+    ours = env.get(LOOPBACK_VAR) == "1"
+    current = env.get(DISCOVERY_RANGE_VAR, "") or None
+    if current is None or current == DEFAULT_DISCOVERY_RANGE:
+        if env.get(PROFILES_FILE_VAR) and not ours:
+            # the user's own Fast DDS profile: theirs to decide; rcl gets LOCALHOST
+            if current is None:
+                env[DISCOVERY_RANGE_VAR] = changed[DISCOVERY_RANGE_VAR] = DEFAULT_DISCOVERY_RANGE
+            return changed
+        wanted = {DISCOVERY_RANGE_VAR: _RCL_RANGE_WITH_PROFILE, LOOPBACK_VAR: "1"}
+        if not env.get(PROFILES_FILE_VAR):
+            wanted[PROFILES_FILE_VAR] = str(LOOPBACK_PROFILE)
+        for name, value in wanted.items():
+            if env.get(name) != value:
+                env[name] = changed[name] = value
+        return changed
+    if strict and current not in VALID_DISCOVERY_RANGES:
         raise RosEnvironmentError(
             f"{DISCOVERY_RANGE_VAR}={current!r} is not a discovery range; "
-            f"use one of {', '.join(VALID_DISCOVERY_RANGES)} (unset means {DEFAULT_DISCOVERY_RANGE})"
+            f"use one of {', '.join(VALID_DISCOVERY_RANGES)} (unset means {DEFAULT_DISCOVERY_RANGE}: loopback only)"
         )
+    if ours:               # the user widened the range in an environment we had prepared: no profile
+        env.pop(LOOPBACK_VAR, None)
+        if env.get(PROFILES_FILE_VAR, "").endswith("/hopper_ros/dds/fastdds_loopback.xml"):
+            env.pop(PROFILES_FILE_VAR, None)      # ours (or the venv's copy of it, tools/hopper_ros_env.pth)
     return changed
 
 

@@ -25,7 +25,9 @@ PDOs (RPDOs event-driven so a command acts when it arrives; TPDOs on every SYNC)
 Exactly one RPDO per SYNC period unless commands arrive faster.
 
 Safety: the drive is enabled only while valid commands keep arriving (`command_timeout`; a stale
-stream ends in quick stop, then disable voltage), the drive's heartbeat is alive and the bus has
+stream ends with the current setpoint zeroed and a quick stop in the same RPDO, then disable
+voltage as soon as the drive reports QUICK STOP ACTIVE, `quick_stop_time` after the trip at the
+latest), the drive's heartbeat is alive and the bus has
 been free of errors for `bus_error_holdoff`. A fault is reset at start-up and after the command
 stream acknowledged it with a disable command. Units: SI at this module's edges, drive units
 (mA, qc, rpm) only in the frames.
@@ -60,7 +62,6 @@ from hopper_ros.canbus.master import (
     nmt_state_name,
     sync_frame,
 )
-from hopper_ros.config import load_yaml
 from hopper_ros.hardware.encoders import Encoder
 from hopper_ros.hardware.motor import RPM_PER_RAD_S, HipMotor
 
@@ -123,8 +124,9 @@ class DriverSettings:
     sync_period: float = 0.001          # [s] SYNC / PDO exchange period
     rpdo_refresh: float = 0.01          # [s] an unchanged RPDO is sent again this often (else every change)
     max_ramp_age: float = 0.005         # [s] MODE_RAMP: a ramp command older than this starts this far back
-    command_timeout: float = 0.02       # [s] no valid command this long: quick stop, then disable
-    quick_stop_time: float = 0.01       # [s] longest QUICK STOP ACTIVE before disable voltage
+    command_timeout: float = 0.01       # [s] no valid command this long: current 0, quick stop, then disable
+    quick_stop_time: float = 0.001      # [s] quick stop at most this long after the watchdog tripped, then
+                                        #   disable voltage (at once when the drive reports QUICK STOP ACTIVE)
     heartbeat_timeout: float = 0.3      # [s] drive heartbeat missing this long: lost
     master_node_id: int = 0x7F          # our heartbeat's node id (COB-ID 0x700 + id)
     master_heartbeat_period: float = 0.02  # [s] our heartbeat; 0: none
@@ -137,36 +139,29 @@ class DriverSettings:
     shutdown_timeout: float = 0.5       # [s] bound on shutdown()
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"motor_driver: {f.name} must be a finite number >= 0, got {value!r}")
-        for name in ("sync_period", "command_timeout", "heartbeat_timeout", "sdo_timeout", "shutdown_timeout"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"motor_driver: {name} must be positive")
-        if not 1 <= self.master_node_id <= 127:
-            raise ValueError(f"motor_driver: master_node_id must be 1..127, got {self.master_node_id}")
-        if self.drive_consumer_time and not 0 < self.master_heartbeat_period < self.drive_consumer_time:
-            raise ValueError("motor_driver: master_heartbeat_period must be positive and below drive_consumer_time")
+        from hopper_ros.config_schemas import MOTOR_DRIVER_SECTION
+        from hopper_ros.schema import validate
+
+        validate(MOTOR_DRIVER_SECTION, {f.name: getattr(self, f.name) for f in fields(self)}, "motor_driver")
 
     @classmethod
-    def from_mapping(cls, section: Mapping[str, Any], **overrides: Any) -> "DriverSettings":
+    def from_mapping(cls, section: Mapping[str, Any], source: str = "motor_driver", **overrides: Any) -> "DriverSettings":
+        """Settings from a `motor_driver` section (validated by its schema) and overrides (node parameters)."""
+        from hopper_ros.config_schemas import MOTOR_DRIVER_SECTION
+        from hopper_ros.schema import validate
+
+        merged = {**dict(section), **{k: v for k, v in overrides.items() if v is not None}}
+        checked = validate(MOTOR_DRIVER_SECTION, merged, source)
         known = {f.name for f in fields(cls)}
-        unknown = set(section) - known - NODE_KEYS
-        if unknown:
-            raise ValueError(f"motor_driver: unknown setting(s) {', '.join(sorted(unknown))}")
-        values = {k: v for k, v in section.items() if k in known}
-        values.update({k: v for k, v in overrides.items() if v is not None})
-        return cls(**values)
+        return cls(**{k: v for k, v in checked.items() if k in known})
 
 
 def load_section(name: str = "motor_driver.yaml") -> dict[str, Any]:
-    """The `motor_driver` section of a config file (driver settings plus the NODE_KEYS)."""
-    data = load_yaml(name) or {}
-    section = data.get("motor_driver") if isinstance(data, Mapping) else None
-    if not isinstance(section, Mapping):
-        raise ValueError(f"{name}: expected a mapping `motor_driver:`")
-    return dict(section)
+    """The `motor_driver` section of a config file (driver settings plus the NODE_KEYS), validated."""
+    from hopper_ros.config_schemas import MOTOR_DRIVER
+    from hopper_ros.schema import load_config
+
+    return dict(load_config(name, MOTOR_DRIVER)["motor_driver"])
 
 
 CONNECT_TIMEOUT = 30.0   # [s] for a socketcand server to accept (the simulated robot may start later)
@@ -287,7 +282,7 @@ class MotorDriver:
         self._last_command: float | None = None
         self._want_enabled = False
         self._quick_stop = False
-        self._quick_stop_since: float | None = None
+        self._watchdog_at = -math.inf       # when the command watchdog last tripped
         self._bus_error_at: float | None = None
         self._reset_armed = True            # a fault found at start-up is reset
         self._reset_edges = 0
@@ -381,11 +376,7 @@ class MotorDriver:
             return
         if self.phase is not Phase.RUNNING:
             return
-        if self._want_enabled and now - self._last_command > self.settings.command_timeout:
-            self._want_enabled, self._quick_stop = False, True
-            self.counters["watchdog_stops"] += 1
-            self._event(WARN, f"no motor command for {(now - self._last_command) * 1e3:.1f} ms: quick stop, "
-                              "then disable")
+        self._trip_watchdog(now)
         if self._sync_outstanding and self._tpdo_seen != (1 << len(TPDO_MAPPINGS)) - 1:
             self.counters["tpdo_missed"] += 1
         self._send_rpdo(now, force=False)
@@ -394,6 +385,34 @@ class MotorDriver:
         if self._send(sync_frame()):
             self.counters["sync_sent"] += 1
             self._sync_outstanding = True
+
+    def watchdog_deadline(self) -> float:
+        """When the command watchdog trips unless a valid command comes first (inf: not armed)."""
+        if self.phase is Phase.RUNNING and self._want_enabled and self._last_command is not None:
+            return self._last_command + self.settings.command_timeout
+        return math.inf
+
+    def watchdog(self) -> bool:
+        """Trip the command watchdog now if it is due (the RPDO goes out at once); True if it tripped.
+
+        `cycle()` checks it every SYNC period; a caller that waits between cycles calls this at
+        `watchdog_deadline()` so the trip is not up to a period late."""
+        now = self.clock()
+        if self.phase is not Phase.RUNNING or not self._trip_watchdog(now):
+            return False
+        self._send_rpdo(now, force=True)
+        return True
+
+    def _trip_watchdog(self, now: float) -> bool:
+        if not (self._want_enabled and now - self._last_command > self.settings.command_timeout):
+            return False
+        self._want_enabled, self._quick_stop = False, True
+        self._watchdog_at = now
+        self._current_ma, self._ramp = 0, None           # the current command zeroed at once
+        self.counters["watchdog_stops"] += 1
+        self._event(WARN, f"no motor command for {(now - self._last_command) * 1e3:.1f} ms: current zeroed, "
+                          "quick stop, then disable")
+        return True
 
     def handle(self, frame: can.Message) -> bool:
         """Take one received frame; True when it completed the TPDOs of a SYNC (new status)."""
@@ -621,8 +640,6 @@ class MotorDriver:
             self.counters["fault_resets"] += 1
             self._reset_armed, self._reset_edges = False, 0
             self._event(INFO, "drive fault reset")
-        if new is State.QUICK_STOP_ACTIVE:
-            self._quick_stop_since = now
 
     def _request_error_code(self) -> None:
         if self.phase is Phase.RUNNING and not self.sdo.busy:
@@ -674,13 +691,9 @@ class MotorDriver:
             if state is State.QUICK_STOP_ACTIVE:
                 return Command.DISABLE_VOLTAGE          # to SWITCH ON DISABLED, then up again
             return Command.SWITCH_ON_AND_ENABLE         # READY, REFRESH, MEASURE INIT, SWITCHED ON, ENABLED
-        if self._quick_stop and self._enable_allowed(now):
-            if state is State.OPERATION_ENABLED:
-                return Command.QUICK_STOP
-            if state is State.QUICK_STOP_ACTIVE:
-                since = self._quick_stop_since if self._quick_stop_since is not None else now
-                if now - since < self.settings.quick_stop_time:
-                    return Command.QUICK_STOP
+        if (self._quick_stop and self._enable_allowed(now) and state is State.OPERATION_ENABLED
+                and now - self._watchdog_at < self.settings.quick_stop_time):
+            return Command.QUICK_STOP                   # until the drive reports it, briefly
         return Command.DISABLE_VOLTAGE
 
     def _fault_reset_word(self, now: float) -> int:
@@ -898,7 +911,7 @@ class MotorDriver:
 
 
 def load_hardware(name: str = "hardware.yaml") -> Mapping[str, Any]:
-    data = load_yaml(name)
-    if not isinstance(data, Mapping):
-        raise ValueError(f"{name}: expected a mapping")
-    return data
+    """config/hardware.yaml (or a variant), validated by its schema (hopper_ros.config_schemas)."""
+    from hopper_ros.config_schemas import load_hardware as load
+
+    return load(name)

@@ -31,7 +31,10 @@ _SEGMENT_KEYS = {"apex_height", "forward_speed", "strides", "seconds"}
 _TOP_KEYS = {"segments", "repeat"}
 
 
-class ScheduleError(ValueError):
+from hopper_ros.schema import ConfigError  # noqa: E402 - no ROS, no heavy import
+
+
+class ScheduleError(ConfigError):
     """A schedule file that cannot be used, with the file and entry named."""
 
 
@@ -121,9 +124,17 @@ def parse_schedule(data: Any, source: str = "<schedule>") -> Schedule:
 
 
 def load_schedule(name: str | os.PathLike) -> Schedule:
-    """Read and validate a schedule file (a path, or relative to the config directory)."""
-    data = load_yaml(name)
-    return parse_schedule(data, source=str(name))
+    """Read and validate a schedule file (a path, or relative to the config directory): its schema
+    (hopper_ros.config_schemas.SCHEDULE) first, then the rules across segments."""
+    from hopper_ros.config import config_path
+    from hopper_ros.config_schemas import SCHEDULE
+    from hopper_ros.schema import ConfigError, load_config
+
+    try:
+        load_config(name, SCHEDULE)
+    except ConfigError as exc:
+        raise ScheduleError(str(exc)) from None
+    return parse_schedule(load_yaml(name), source=str(config_path(name)))
 
 
 class ScheduleRunner:

@@ -53,6 +53,9 @@ def _free_domain_id() -> int:
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ["ROS_DOMAIN_ID"] = str(_free_domain_id())
+from hopper_ros.environment import apply_ros_environment  # noqa: E402 - after the range is set
+
+apply_ros_environment()   # LOCALHOST: the loopback profile (every DDS socket on 127.0.0.1), for children too
 os.environ.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
 
 # Started with `&` from a script (`bash -c 'make test & wait $!'`, a CI runner), this session

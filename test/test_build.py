@@ -144,12 +144,16 @@ def test_ament_index_finds_the_package_without_manual_environment():
         import os
         from ament_index_python.packages import get_package_share_directory
         print(get_package_share_directory('hopper_ros'))
-        print(os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'])
-        """, AMENT_PREFIX_PATH=None, ROS_AUTOMATIC_DISCOVERY_RANGE=None)
+        print(os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'], os.environ['HOPPER_DDS_LOOPBACK'])
+        print(os.environ['FASTDDS_DEFAULT_PROFILES_FILE'])
+        """, AMENT_PREFIX_PATH=None, ROS_AUTOMATIC_DISCOVERY_RANGE=None, HOPPER_DDS_LOOPBACK=None,
+        FASTDDS_DEFAULT_PROFILES_FILE=None)
     assert result.returncode == 0, result.stderr
-    share, discovery = result.stdout.split()
+    share, discovery, marker, profile = result.stdout.split()
     assert Path(share) == VENV / "share" / "hopper_ros"
-    assert discovery == "LOCALHOST"
+    # the loopback profile (hopper_ros.environment): rcl gets SYSTEM_DEFAULT, the profile keeps DDS on 127.0.0.1
+    assert (discovery, marker) == ("SYSTEM_DEFAULT", "1")
+    assert Path(profile).read_bytes() == (ROOT / "hopper_ros" / "dds" / "fastdds_loopback.xml").read_bytes()
 
 
 PUBSUB = """

@@ -213,3 +213,80 @@ def test_canopen_master_in_another_process_drives_the_emulated_epos2():
                 assert drive.counters.emcy_sent >= 4                     # 2 errors, 2 resets
                 assert drive.value(eo.ERROR_HISTORY, 1) == 0x8210 and drive.value(eo.ERROR_HISTORY, 2) == 0x2310
             assert hub.counters.frames_from_clients > 20 and hub.counters.garbage_commands == 0
+
+
+# --------------------------------------------------------------------------- abuse (issue 17)
+
+ATTACK_CLIENTS = 200
+ATTACK_SECONDS = 10.0
+
+
+def _phase_figures(line: str) -> dict[str, float]:
+    name, *pairs = line.split()
+    figures = {key: float(value) for key, value in (pair.split("=") for pair in pairs)}
+    figures["phase"] = name
+    return figures
+
+
+class LoadClient:
+    """test/data/socketcand_load_client.py: a canopen master in its own process (SYNC + SDO)."""
+
+    def __init__(self, port: int):
+        self.child = subprocess.Popen(
+            [sys.executable, str(DATA / "socketcand_load_client.py"), str(port), str(EDS), str(NODE)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+        line = self.child.stdout.readline().strip()
+        assert line == "ready", f"load client: {line!r} {self.child.stderr.read() if not line else ''}"
+
+    def start_phase(self, name: str, seconds: float) -> None:
+        self.child.stdin.write(f"phase {name} {seconds}\n")
+        self.child.stdin.flush()
+
+    def result(self) -> dict:
+        return _phase_figures(self.child.stdout.readline())
+
+    def phase(self, name: str, seconds: float) -> dict:
+        self.start_phase(name, seconds)
+        return self.result()
+
+    def close(self) -> None:
+        if self.child.poll() is None:
+            try:
+                self.child.stdin.write("quit\n")
+                self.child.stdin.flush()
+                self.child.wait(TIMEOUT)
+            except (OSError, subprocess.TimeoutExpired):
+                self.child.kill()
+                self.child.wait(TIMEOUT)
+
+
+def test_clients_that_stop_reading_cannot_stall_the_hub():
+    """200 clients enter raw mode and never read again, for 10 s (dropped ones reconnect at once);
+    a well-formed canopen master in another process keeps every SDO round trip and gets its TPDO
+    for the SYNCs it sends, during the attack and after it; the hub drops and counts the slow
+    clients and greets new clients afterwards (it used to deadlock for good)."""
+    from hub_attack import RawModeAttack, handshake
+
+    with SocketcandServer(host="127.0.0.1", port=0, channel="can0") as hub:
+        with DriveLoop(hub.local_bus()):
+            load = LoadClient(hub.port)
+            try:
+                with RawModeAttack(hub.port, clients=ATTACK_CLIENTS) as attack:
+                    assert wait(lambda: attack.connected >= ATTACK_CLIENTS, 30.0), attack.connected
+                    during = load.phase("attack", ATTACK_SECONDS)
+                reopened, failures = attack.reopened, attack.failures
+                after = load.phase("after", 2.0)
+            finally:
+                load.close()
+            for figures in (during, after):
+                assert figures["sdo_failed"] == 0, figures
+                assert figures["sdo_ok"] >= 0.25 * figures["syncs"] / 20, figures    # one SDO per 20 SYNC periods
+                assert figures["tpdo1"] >= 0.5 * figures["syncs"], figures
+                assert figures["tpdo_gap_max_ms"] < 2000.0, figures                   # never stalled
+            assert hub.counters.slow_clients_dropped >= ATTACK_CLIENTS, (hub.counters, reopened)
+            assert reopened >= ATTACK_CLIENTS and failures == 0, (reopened, failures)
+            fresh = handshake(hub.port)                                               # served again
+            fresh.close()
+            with client(hub) as bus:
+                recv_until(bus, lambda m: m.arbitration_id == 0x700 + NODE)           # the drive's heartbeat
+            assert wait(lambda: hub.client_count == 0)

@@ -135,10 +135,12 @@ def test_single_stride_experiment_runs_fig_4_1_and_brakes():
 
 
 def test_bad_settings_name_the_problem():
-    with pytest.raises(ValueError, match="unknown setting"):
+    with pytest.raises(ValueError, match="deadbeat.gain: unknown key"):
         DeadbeatSettings.from_mapping({"gain": 1.0})
-    with pytest.raises(ValueError, match="predictor 'magic'"):
+    with pytest.raises(ValueError, match="deadbeat.predictor: must be one of .* got 'magic'"):
         DeadbeatSettings.from_mapping({"predictor": "magic"})
+    with pytest.raises(ValueError, match=r"deadbeat.max_torque: must be > 0 N m, got -12"):   # issue 17
+        DeadbeatSettings.from_mapping({"max_torque": -12.0})
 
 
 def test_the_whole_graph_logic_closes_the_loop_in_lockstep():

@@ -11,28 +11,46 @@ import pytest
 
 from hopper_ros.environment import (
     DISCOVERY_RANGE_VAR,
+    LOOPBACK_PROFILE,
+    LOOPBACK_VAR,
+    PROFILES_FILE_VAR,
     RosEnvironmentError,
     apply_ros_environment,
     discovery_range,
+    loopback_installed,
 )
 
 STARTED = r"\bstarted: pid (\d+), ROS_DOMAIN_ID (\d+), discovery range (\S+)"
 SPDP_GROUP_HEX = "0100FFEF"  # 239.255.0.1 as /proc/net/igmp stores it (little-endian hex)
 
 
-@pytest.mark.parametrize("before", [None, ""])
-def test_unset_or_empty_range_becomes_localhost(before):
+@pytest.mark.parametrize("before", [None, "", "LOCALHOST"])
+def test_unset_empty_or_localhost_installs_the_loopback_profile(before):
     env = {} if before is None else {DISCOVERY_RANGE_VAR: before}
-    assert apply_ros_environment(env) == {DISCOVERY_RANGE_VAR: "LOCALHOST"}
-    assert env[DISCOVERY_RANGE_VAR] == "LOCALHOST" and discovery_range(env) == "LOCALHOST"
-    assert apply_ros_environment(env) == {}  # idempotent
+    assert apply_ros_environment(env) == {DISCOVERY_RANGE_VAR: "SYSTEM_DEFAULT", LOOPBACK_VAR: "1",
+                                          PROFILES_FILE_VAR: str(LOOPBACK_PROFILE)}
+    assert discovery_range(env) == "LOCALHOST" and loopback_installed(env)
+    assert apply_ros_environment(env) == {}  # idempotent (a child started with this environment)
+    assert LOOPBACK_PROFILE.is_file()
 
 
-@pytest.mark.parametrize("chosen", ["OFF", "LOCALHOST", "SUBNET", "SYSTEM_DEFAULT"])
-def test_a_range_the_user_chose_is_kept(chosen):
+@pytest.mark.parametrize("chosen", ["OFF", "SUBNET", "SYSTEM_DEFAULT"])
+def test_a_wider_range_the_user_chose_is_kept_without_the_profile(chosen):
     env = {DISCOVERY_RANGE_VAR: chosen}
     assert apply_ros_environment(env) == {}
-    assert env[DISCOVERY_RANGE_VAR] == chosen
+    assert env == {DISCOVERY_RANGE_VAR: chosen} and discovery_range(env) == chosen
+    # chosen in an environment we had prepared (e.g. a launch file's env): the profile goes
+    prepared = {}
+    apply_ros_environment(prepared)
+    prepared[DISCOVERY_RANGE_VAR] = chosen if chosen != "SYSTEM_DEFAULT" else "SUBNET"
+    apply_ros_environment(prepared)
+    assert LOOPBACK_VAR not in prepared and PROFILES_FILE_VAR not in prepared
+
+
+def test_a_users_own_fast_dds_profile_is_respected():
+    env = {PROFILES_FILE_VAR: "/home/me/my_profile.xml"}
+    assert apply_ros_environment(env) == {DISCOVERY_RANGE_VAR: "LOCALHOST"}
+    assert env[PROFILES_FILE_VAR] == "/home/me/my_profile.xml" and not loopback_installed(env)
 
 
 def test_an_invalid_range_is_refused():
@@ -178,3 +196,84 @@ def test_a_test_session_started_in_the_background_still_stops_what_it_starts():
     assert result.returncode == 0, result.stdout + result.stderr
     assert "restored default SIGINT, SIGQUIT: started with them ignored" in result.stdout
     assert "1 passed" in result.stdout
+
+
+# --------------------------------------------------------------------------- every socket on loopback (issue 17)
+
+_LOOPBACK_V6 = {"00000000000000000000000001000000",           # ::1
+                "0000000000000000FFFF00000100007F"}           # ::ffff:127.0.0.1
+
+
+def _sockets_by_inode() -> dict[int, tuple[str, str]]:
+    """inode -> (protocol, local address as in /proc/net) for every IP socket of this machine."""
+    found = {}
+    for protocol in ("udp", "udp6", "tcp", "tcp6", "raw", "raw6"):
+        for line in Path(f"/proc/net/{protocol}").read_text().splitlines()[1:]:
+            fields = line.split()
+            found[int(fields[9])] = (protocol, fields[1])
+    return found
+
+
+def _on_loopback(local: str) -> bool:
+    address = local.rsplit(":", 1)[0].upper()
+    if len(address) == 8:                                      # IPv4, little-endian hex: 127.x.x.x
+        return address.endswith("7F")
+    return address in _LOOPBACK_V6
+
+
+def _node_sockets(pid: int) -> list[tuple[str, str]]:
+    table = _sockets_by_inode()
+    return [table[inode] for inode in _socket_inodes(pid) if inode in table]
+
+
+def test_the_check_sees_a_socket_off_loopback():
+    import socket
+
+    wide = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    wide.bind(("0.0.0.0", 0))                                  # bound, never used
+    narrow = socket.socket(socket.AF_INET6, socket.SOCK_DGRAM)
+    narrow.bind(("::1", 0))
+    try:
+        verdicts = {local: _on_loopback(local) for _, local in _node_sockets(os.getpid())}
+        port = lambda sock: f"{sock.getsockname()[1]:04X}"     # noqa: E731
+        assert [ok for local, ok in verdicts.items() if local.endswith(":" + port(wide))] == [False]
+        assert [ok for local, ok in verdicts.items() if local.endswith(":" + port(narrow))] == [True]
+    finally:
+        wide.close()
+        narrow.close()
+
+
+def test_every_socket_of_running_nodes_is_on_loopback(hopper_cli):
+    """DDS (every node), the CAN hub and its client, the UDP encoder stream: sim_robot, motor_driver,
+    encoder_bridge and setpoint_scheduler started as users start them; every IP socket they hold is
+    on 127.0.0.1 or ::1 (Fast DDS used to bind 0.0.0.0 and eth0's address as well)."""
+    import socket
+    import time
+
+    from conftest import free_port
+
+    hub_port, udp_port = free_port(), free_port(socket.SOCK_DGRAM)
+    sim = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=hub", "-p", f"can_port:={hub_port}",
+                     "-p", f"udp_port:={udp_port}", "-p", "hold:=true")
+    sim.wait_for_line(rf"CAN hub on 127.0.0.1:{hub_port}")
+    nodes = {
+        "sim_robot": sim,
+        "encoder_bridge": hopper_cli("run", "encoder_bridge", "--ros-args", "-p", f"port:={udp_port}"),
+        "motor_driver": hopper_cli("run", "motor_driver", "--ros-args", "-p", f"port:={hub_port}"),
+        "setpoint_scheduler": hopper_cli("run", "setpoint_scheduler"),
+    }
+    pids = {name: int(node.wait_for_line(STARTED).group(1)) for name, node in nodes.items()}
+    for node in nodes.values():
+        node.wait_for_line(r"discovery range LOCALHOST \(every DDS socket on 127\.0\.0\.1: .*fastdds_loopback\.xml\)")
+    nodes["motor_driver"].wait_for_line(r"drive 1 configured and started")
+    time.sleep(1.0)                                            # discovery has run: all transports up
+    held = {name: _node_sockets(pid) for name, pid in pids.items()}
+    for name, sockets in held.items():
+        assert any(protocol.startswith("udp") for protocol, _ in sockets), f"{name}: no UDP socket: {sockets}"
+        off = [(protocol, local) for protocol, local in sockets if not _on_loopback(local)]
+        assert not off, f"{name} holds sockets off loopback: {off}"
+    assert any(p.startswith("tcp") for p, _ in held["sim_robot"]) and any(p.startswith("tcp") for p, _ in held["motor_driver"])
+    for name, node in nodes.items():
+        node.signal(signal.SIGINT)
+    for name, node in nodes.items():
+        assert node.wait() == 0, f"{name}: {node.stderr[-2000:]}"

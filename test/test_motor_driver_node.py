@@ -20,6 +20,7 @@ from hopper_ros.motor_driver import load_hardware
 
 HW = load_hardware()
 K_T, GEAR = HW["motor"]["torque_constant"], HW["motor"]["gear_ratio"]
+RPDO_COB_IDS = {eo.rpdo_cob_id(n, int(HW["drive"]["node_id"])) for n in (1, 2)}
 
 
 class DriveThread:
@@ -27,6 +28,7 @@ class DriveThread:
 
     def __init__(self, hub: SocketcandServer):
         self.bus = hub.local_bus()
+        self.spy = hub.local_bus()                      # every RPDO on the bus (the drive may take two in one poll)
         self.drive = Epos2Emulator(self.bus, HW)
         self.actions: queue.Queue = queue.Queue()       # run in the drive's thread (it is single-threaded)
         self.controlwords: list[int] = []
@@ -42,8 +44,11 @@ class DriveThread:
                 self.actions.get()(now)
             drive.poll(now)
             drive.control(now, 0, 0.0, drive.demand)
-            if not self.controlwords or self.controlwords[-1] != drive.controlword:
-                self.controlwords.append(drive.controlword)
+            while (frame := self.spy.recv(timeout=0)) is not None:
+                if frame.arbitration_id in RPDO_COB_IDS and len(frame.data) >= 2:
+                    controlword = int.from_bytes(frame.data[:2], "little")
+                    if not self.controlwords or self.controlwords[-1] != controlword:
+                        self.controlwords.append(controlword)
             time.sleep(0.0005)
 
     def wait_for(self, condition, timeout: float = SAFETY_TIMEOUT) -> None:
@@ -133,7 +138,7 @@ def test_node_drives_the_epos2_reports_and_stops_safely_on_sigterm(rclpy_session
         report = next(d for d in got["diagnostics"] if d.message == "command timeout: drive stopped")
         assert level_of(report) == WARN and report.name == "/motor_driver" and report.hardware_id.startswith("EPOS2 node")
         assert status_values(report)["watchdog_stops"] >= 1   # more if we stalled
-        process.wait_for_line(r"no motor command for \d+\.\d ms: quick stop")
+        process.wait_for_line(r"no motor command for \d+\.\d ms: current zeroed, quick stop")
 
         # a drive fault: EMCY decoded into the EPOS2's words
         command(MotorCommand.MODE_CURRENT, 1.0, 0.1, until=lambda: drive.drive.state is State.OPERATION_ENABLED)

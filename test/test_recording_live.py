@@ -41,7 +41,7 @@ def test_sigint_closes_a_bag_recorded_from_the_simulated_robot(hopper_cli, tmp_p
         for topic, type_name in (("/force_plate", "hopper_ros/msg/GroundReactionForce"),
                                  ("/sim/truth", "hopper_ros/msg/BodyState"),
                                  ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")):
-            recorder.wait_for_line(rf"recording {topic} \[{type_name}\]")
+            recorder.wait_for_line(rf"subscribed to {topic} \[{type_name}\]")
         time.sleep(1.5)
         recorder.signal(signal.SIGINT)
         assert recorder.wait() == 0
@@ -94,7 +94,7 @@ def test_sigkill_loses_at_most_the_last_chunk(rclpy_session, hopper_cli, tmp_pat
     recorder = hopper_cli("bag", "record", "body_measurement", "-o", str(tmp_path / "bag"),
                           "--chunk-interval", str(interval))
     try:
-        recorder.wait_for_line(r"recording /body_measurement")
+        recorder.wait_for_line(r"subscribed to /body_measurement")
         time.sleep(2.0)
         at_kill = published[0]
         recorder.process.send_signal(signal.SIGKILL)          # the recorder's own pid: no chance to clean up
@@ -118,3 +118,66 @@ def test_sigkill_loses_at_most_the_last_chunk(rclpy_session, hopper_cli, tmp_pat
     assert repaired.wait() == 0 and f"recovered {len(sequences)} messages" in repaired.stdout
     recovered = rosbags_messages(tmp_path / "bag")
     assert [msg.sequence for _, _, msg in recovered] == sequences
+
+
+def _publish_and_record(rclpy_session, tmp_path, name, count, take_every, depth=None, monkeypatch=None):
+    """Publish `count` BodyMeasurement (sequence 0..count-1) on a reliable KEEP_LAST 100 topic
+    while a Recorder takes what arrives, calling spin_once only every `take_every` messages."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from hopper_ros.msg import BodyMeasurement
+    from hopper_ros.recording import recorder as recorder_module
+    from hopper_ros.recording.bag import BagWriter
+
+    if depth is not None:
+        monkeypatch.setattr(recorder_module, "SUBSCRIPTION_DEPTH", depth)
+    node = rclpy_session.create_node(f"recorder_test_{name}")
+    publisher = node.create_publisher(BodyMeasurement, f"recorder_test_{name}", QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    lines = []
+    bag = BagWriter(tmp_path / name)
+    recorder = recorder_module.Recorder(node, bag, [f"recorder_test_{name}"], log=lines.append)
+    try:
+        end = time.monotonic() + 30.0
+        while not recorder.subscriptions or publisher.get_subscription_count() < 1:
+            assert time.monotonic() < end, "the recorder did not subscribe"
+            recorder.discover()
+            time.sleep(0.02)
+        msg = BodyMeasurement()
+        for sequence in range(count):
+            msg.sequence = sequence
+            publisher.publish(msg)
+            if (sequence + 1) % take_every == 0:
+                recorder.spin_once(0.0)
+            time.sleep(0.0002)
+        end = time.monotonic() + 5.0
+        while recorder.received + sum(recorder.dropped.values()) < count and time.monotonic() < end:
+            recorder.spin_once(0.05)
+    finally:
+        recorder.close()
+        bag.close()
+        node.destroy_node()
+    sequences = [m.sequence for _, _, m in BagReader(tmp_path / name).messages()]
+    return recorder, sequences, lines
+
+
+def test_recorder_keeps_every_message_and_says_from_when(rclpy_session, tmp_path):
+    recorder, sequences, lines = _publish_and_record(rclpy_session, tmp_path, "all", 3000, take_every=10)
+    assert sequences == list(range(3000))                          # nothing missing inside the bag
+    assert recorder.dropped == {"/recorder_test_all": 0}
+    assert any(line.startswith("recording from ") and "first message, on /recorder_test_all" in line
+               for line in lines), lines
+
+
+def test_recorder_counts_every_message_it_could_not_keep(rclpy_session, tmp_path, monkeypatch):
+    """A recorder that falls behind a subscription of depth 20 (taking only every 500 messages):
+    the history replaces the oldest, and each message never taken is counted as dropped, from the
+    publisher's sequence numbers: what is in the bag plus what is counted is all that was published."""
+    recorder, sequences, lines = _publish_and_record(rclpy_session, tmp_path, "behind", 3000, take_every=500,
+                                                     depth=20, monkeypatch=monkeypatch)
+    dropped = recorder.dropped["/recorder_test_behind"]
+    assert dropped > 0 and len(sequences) + dropped == 3000 - sequences[0]
+    assert sequences == sorted(sequences) and len(set(sequences)) == len(sequences)
+    recorder.report_drops()
+    assert any(line.startswith(f"DROPPED {dropped} message(s) of /recorder_test_behind") for line in lines), lines
+    assert "dropped " + str(dropped) in "\n".join(recorder.summary())

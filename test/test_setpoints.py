@@ -161,5 +161,5 @@ def test_node_rejects_a_bad_schedule(rclpy_session, tmp_path):
 
     path = tmp_path / "bad.yaml"
     path.write_text("segments:\n  - {apex_height: -0.1, forward_speed: 2.0}\n")
-    with pytest.raises(ScheduleError, match=r"bad.yaml: segment 1: 'apex_height' must be positive"):
+    with pytest.raises(ScheduleError, match=r"bad.yaml: segments\[0\].apex_height: must be > 0 m, got -0.1"):
         SetpointScheduler(parameter_overrides=[Parameter("schedule_file", value=str(path))])

@@ -184,3 +184,44 @@ def test_canopen_master_in_another_process_drives_the_simulated_epos2(hopper_cli
         node.signal(signal.SIGINT)
         assert node.wait() == 0
         udp.close()
+
+
+def test_sigterm_stops_sim_robot_whatever_its_hub_clients_do(hopper_cli):
+    """Issue 17: 200 hub clients in raw mode that never read (dropped ones reconnect) and a master
+    sending SYNC at 1 kHz: the simulated robot keeps stepping, the master keeps its SDO round trips,
+    and SIGTERM ends the node promptly (it used to hang in a blocking write to the hub; the bench
+    measures how promptly: hub_sigterm_stop_s)."""
+    from hub_attack import RawModeAttack
+    from test_canbus_socketcand import LoadClient
+
+    hub_port = free_port()
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    udp.bind(("127.0.0.1", 0))
+    node = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=hub", "-p", f"can_port:={hub_port}",
+                      "-p", f"udp_port:={udp.getsockname()[1]}", "-p", "hold:=true")
+    try:
+        node.wait_for_line(rf"CAN hub on 127.0.0.1:{hub_port}")
+        load = LoadClient(hub_port)
+        try:
+            with RawModeAttack(hub_port, clients=200) as attack:
+                load.start_phase("attack", 8.0)                          # SYNC at 1 kHz: traffic
+                end = time.monotonic() + 8.0
+                while attack.reopened < 200 and time.monotonic() < end:   # every client dropped once
+                    time.sleep(0.1)
+                reopened = attack.reopened
+                before = latest_packets(udp, 1)[0].sequence
+                time.sleep(0.2)
+                assert latest_packets(udp, 1)[0].sequence > before + 50   # the robot keeps stepping
+                started = time.monotonic()
+                node.signal(signal.SIGTERM)                              # attack and SYNC still on
+                status = node.wait(10.0)
+                stopped_after = time.monotonic() - started
+                load.result()
+        finally:
+            load.close()
+    finally:
+        udp.close()
+    assert status == 0, node.stderr
+    assert stopped_after < 10.0
+    assert reopened >= 200
+    assert "stopping on SIGTERM" in node.stderr

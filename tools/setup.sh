@@ -90,7 +90,10 @@ if [[ ${#site_packages[@]} -ne 1 || ! -d "${site_packages[0]}" ]]; then
 fi
 site_packages="${site_packages[0]}"
 
-# Start-up hook: AMENT_PREFIX_PATH includes the venv, DDS discovery stays on loopback.
+# Start-up hook: AMENT_PREFIX_PATH includes the venv, DDS stays on loopback (the Fast DDS
+# profile it installs is a copy of hopper_ros/dds/fastdds_loopback.xml in the venv).
+mkdir -p "$VENV/share/hopper_ros/dds"
+install_if_changed hopper_ros/dds/fastdds_loopback.xml "$VENV/share/hopper_ros/dds/fastdds_loopback.xml"
 install_if_changed tools/hopper_ros_env.pth "$site_packages/hopper_ros_env.pth"
 
 # ---------------------------------------------------------------- msgs

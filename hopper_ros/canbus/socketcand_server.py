@@ -14,19 +14,35 @@ then frames to the client as `< frame ID SECONDS.USEC DATAHEX >` (ID: 3 hex digi
 digits = 29-bit). The client compares the handshake answers byte for byte, so no frame follows
 `< ok >` for RAWMODE_GRACE; frames of that time are queued, not lost.
 
-Robustness: the hub binds 127.0.0.1 (or another IPv4 loopback address) only and refuses any
-other host; a command it cannot parse is counted (`counters.garbage_commands`) and dropped; a
-client that sends an endless unterminated command or stops reading is closed; a disconnect is
-just a disconnect. It runs in two daemon threads; `close()` stops them and releases everything.
+Nothing a client does can stall the hub (issue 17). Every client socket is non-blocking and
+only the socket thread writes to it. Frames to clients go into one shared, bounded log of
+formatted frames (`MAX_QUEUED_FRAMES`); each client has a cursor into it and an output buffer
+of at most `MAX_OUTPUT_BYTES`. Each turn of the socket thread moves every client's new frames
+into its buffer and sends what the kernel takes; a client whose socket is full is left until
+the selector says it is writable again. A client that falls a whole log behind (it stopped
+reading, or reads slower than the bus) is closed and counted (`slow_clients_dropped`); the other
+clients never wait for it. The in-process side never waits either: the bus thread only appends
+to the log, and its wake-up of the socket thread is a non-blocking write that is skipped while
+one is pending. A turn of the socket thread is bounded by the number of clients, so the more
+clients there are, the more frames each `send` carries.
+
+Robustness otherwise: the hub binds 127.0.0.1 (or another IPv4 loopback address) only and
+refuses any other host; a command it cannot parse is counted (`garbage_commands`) and dropped;
+a client that sends an endless unterminated command, does not finish the handshake within
+`HANDSHAKE_TIMEOUT` or would exceed `MAX_CLIENTS` is closed (counted); a disconnect is just a
+disconnect. It runs in two daemon threads; `close()` stops them within about 0.1 s and releases
+everything.
 """
 
 from __future__ import annotations
 
+import errno
 import ipaddress
 import logging
 import re
 import selectors
 import socket
+import struct
 import threading
 import time
 import uuid
@@ -41,13 +57,24 @@ log = logging.getLogger(__name__)
 RAWMODE_GRACE = 0.1
 #: longest command accepted [characters] (`< send 1FFFFFFF 8 ff ff ... >` is about 45)
 MAX_COMMAND_LENGTH = 256
-#: a client that cannot take a frame within this time [s] is closed
-SEND_TIMEOUT = 1.0
-#: frames queued per client during RAWMODE_GRACE at most
-MAX_PENDING_FRAMES = 10000
+#: frames kept for clients that have not taken them yet; a client further behind is dropped
+#: (at the drive's ~3000 frames/s of a 1 kHz SYNC loop: about 1.3 s)
+MAX_QUEUED_FRAMES = 4096
+#: bytes waiting in one client's output buffer at most (frames stay in the log beyond it)
+MAX_OUTPUT_BYTES = 64 * 1024
+#: kernel send buffer per client [bytes]: a client that stops reading is noticed quickly
+CLIENT_SEND_BUFFER = 64 * 1024
+#: a client must reach raw mode within this time [s] (frees slots held by idle connections)
+HANDSHAKE_TIMEOUT = 5.0
+#: clients served at once; more are accepted and closed at once (counted)
+MAX_CLIENTS = 512
+#: replies (`< ok >`, `< echo >`, ...) waiting for one client at most [bytes]
+MAX_REPLY_BYTES = 4096
 _RECV_SIZE = 4096
 _SELECT_TIMEOUT = 0.01      # [s] socket thread wake-up (flushes queues after the grace time)
 _BUS_TIMEOUT = 0.05         # [s] bus thread receive timeout (bounds close() latency)
+_ACCEPTS_PER_TURN = 64      # connections accepted per socket-thread turn at most
+_READS_PER_TURN = 16        # reads per client per turn at most (one client cannot starve the rest)
 _STANDARD_ID_DIGITS = 3
 _MAX_STANDARD_ID = 0x7FF
 _MAX_EXTENDED_ID = 0x1FFFFFFF
@@ -109,21 +136,51 @@ class HubCounters:
     clients_accepted: int = 0
     clients_closed: int = 0
     frames_from_clients: int = 0
-    frames_to_clients: int = 0
+    frames_to_clients: int = 0       # frames handed to client sockets (summed over clients)
     garbage_commands: int = 0
-    dropped_frames: int = 0          # frames the protocol cannot carry (RTR) or a queue overflow
+    dropped_frames: int = 0          # frames the protocol cannot carry (RTR)
+    slow_clients_dropped: int = 0    # closed: fell MAX_QUEUED_FRAMES behind or let replies pile up
+    clients_refused: int = 0         # closed at accept: MAX_CLIENTS reached or no descriptor left
+    handshake_timeouts: int = 0      # closed: not in raw mode within HANDSHAKE_TIMEOUT
 
 
 @dataclass(eq=False)
 class _Client:
     sock: socket.socket
     peer: tuple
+    accepted: float
     buffer: str = ""
     state: str = "greeted"           # greeted -> open -> raw
     raw_since: float = 0.0
-    pending: deque = field(default_factory=lambda: deque(maxlen=MAX_PENDING_FRAMES))
-    lock: threading.Lock = field(default_factory=threading.Lock)
+    cursor: int = 0                  # sequence number of the next log entry this client needs
+    output: bytearray = field(default_factory=bytearray)   # frames taken from the log, unsent
+    replies: bytearray = field(default_factory=bytearray)  # handshake/echo answers, sent first
+    writable: bool = True            # False after EAGAIN until the selector reports EVENT_WRITE
+    watch_write: bool = False        # registered for EVENT_WRITE
     dead: bool = False
+    slow: bool = False               # dropped for not keeping up (closed with a reset)
+    reason: str = ""
+
+
+class _FrameLog:
+    """Formatted frames for the clients, numbered; the oldest go when MAX_QUEUED_FRAMES are kept."""
+
+    def __init__(self, capacity: int):
+        self.lock = threading.Lock()
+        self.entries: deque = deque()        # (origin client or None, ascii bytes)
+        self.first = 0                       # sequence number of entries[0]
+        self.capacity = capacity
+
+    @property
+    def head(self) -> int:
+        return self.first + len(self.entries)
+
+    def append(self, origin, data: bytes) -> None:
+        with self.lock:
+            self.entries.append((origin, data))
+            if len(self.entries) > self.capacity:
+                self.entries.popleft()
+                self.first += 1
 
 
 class SocketcandServer:
@@ -141,8 +198,8 @@ class SocketcandServer:
         self._bus = bus if bus is not None else can.Bus(interface="virtual", channel=self.virtual_channel)
         self._local_buses: list[can.BusABC] = []
         self.counters = HubCounters()
-        self._clients: list[_Client] = []
-        self._clients_lock = threading.Lock()
+        self._log = _FrameLog(MAX_QUEUED_FRAMES)
+        self._clients: list[_Client] = []        # the socket thread's; others read a snapshot
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._closed = False
@@ -150,7 +207,7 @@ class SocketcandServer:
         try:
             self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             self._listener.bind((self.host, int(port)))
-            self._listener.listen()
+            self._listener.listen(128)
             self._listener.setblocking(False)
         except OSError:
             self._listener.close()
@@ -160,6 +217,8 @@ class SocketcandServer:
         self.port = self._listener.getsockname()[1]
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)          # a full pipe means a wake-up is pending anyway
+        self._wake_pending = threading.Event()
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -169,8 +228,7 @@ class SocketcandServer:
 
     @property
     def client_count(self) -> int:
-        with self._clients_lock:
-            return sum(1 for c in self._clients if not c.dead)
+        return sum(1 for c in list(self._clients) if not c.dead)
 
     def start(self) -> "SocketcandServer":
         if self._threads:
@@ -189,17 +247,17 @@ class SocketcandServer:
         return bus
 
     def close(self) -> None:
+        """Stop both threads (each wakes at least every 50 ms) and close every socket."""
         if self._closed:
             return
         self._closed = True
         self._stop.set()
         self._wake()
         for thread in self._threads:
-            thread.join(5.0)
-        with self._clients_lock:
-            clients, self._clients = self._clients, []
-        for client in clients:
+            thread.join(2.0)
+        for client in list(self._clients):
             self._close_socket(client.sock)
+        self._clients = []
         self._listener.close()
         self._wake_r.close()
         self._wake_w.close()
@@ -214,74 +272,99 @@ class SocketcandServer:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    # ------------------------------------------------------------------ socket side
+    # ------------------------------------------------------------------ socket thread
 
     def _wake(self) -> None:
+        """Wake the socket thread; never blocks (one pending wake-up is enough)."""
+        if self._wake_pending.is_set():
+            return
+        self._wake_pending.set()
         try:
             self._wake_w.send(b"\0")
-        except OSError:
+        except OSError:                       # full (a wake-up is pending) or closed
             pass
 
     def _serve_sockets(self) -> None:
         selector = selectors.DefaultSelector()
         selector.register(self._listener, selectors.EVENT_READ, "listen")
         selector.register(self._wake_r, selectors.EVENT_READ, "wake")
-        registered: set[_Client] = set()
         try:
             while not self._stop.is_set():
-                for key, _ in selector.select(_SELECT_TIMEOUT):
+                for key, events in selector.select(_SELECT_TIMEOUT):
                     if key.data == "listen":
-                        self._accept(selector, registered)
+                        self._accept(selector)
                     elif key.data == "wake":
+                        self._wake_pending.clear()
                         try:
-                            self._wake_r.recv(_RECV_SIZE)
+                            while self._wake_r.recv(_RECV_SIZE):
+                                pass
                         except OSError:
                             pass
                     else:
-                        self._read(key.data)
-                self._flush_pending()
-                for client in [c for c in registered if c.dead]:
-                    selector.unregister(client.sock)
-                    registered.discard(client)
-                    self._drop(client)
+                        client = key.data
+                        if events & selectors.EVENT_WRITE:
+                            client.writable = True
+                        if events & selectors.EVENT_READ:
+                            self._read(client)
+                self._flush(selector)
         except Exception:                                     # keep close() working
             log.exception("socketcand hub: socket thread failed")
         finally:
             selector.close()
 
-    def _accept(self, selector, registered: set) -> None:
-        try:
-            sock, peer = self._listener.accept()
-        except OSError:
-            return
-        sock.setblocking(True)
-        sock.settimeout(SEND_TIMEOUT)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        client = _Client(sock=sock, peer=peer)
-        self.counters.clients_accepted += 1
-        if not self._send_text(client, "< hi >"):
-            self._drop(client)
-            return
-        with self._clients_lock:
-            self._clients.append(client)
-        selector.register(sock, selectors.EVENT_READ, client)
-        registered.add(client)
-        log.info("socketcand hub: client %s connected", peer)
+    def _accept(self, selector) -> None:
+        for _ in range(_ACCEPTS_PER_TURN):
+            try:
+                sock, peer = self._listener.accept()
+            except BlockingIOError:
+                return
+            except OSError as exc:                           # e.g. EMFILE: refuse, do not spin
+                if exc.errno in (errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM):
+                    self.counters.clients_refused += 1
+                    log.warning("socketcand hub: cannot accept a client: %s", exc)
+                    time.sleep(_SELECT_TIMEOUT)
+                return
+            if len(self._clients) >= MAX_CLIENTS:
+                self.counters.clients_refused += 1
+                self._close_socket(sock)
+                continue
+            sock.setblocking(False)
+            try:
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, CLIENT_SEND_BUFFER)
+            except OSError:
+                pass
+            client = _Client(sock=sock, peer=peer, accepted=time.monotonic())
+            self.counters.clients_accepted += 1
+            client.replies += b"< hi >"
+            self._clients = self._clients + [client]
+            selector.register(sock, selectors.EVENT_READ, client)
+            log.info("socketcand hub: client %s connected", peer)
 
     def _read(self, client: _Client) -> None:
-        try:
-            data = client.sock.recv(_RECV_SIZE)
-        except (OSError, socket.timeout):
-            data = b""
-        if not data:
-            client.dead = True                               # disconnected
-            return
-        client.buffer += data.decode("ascii", errors="replace")
-        self._parse(client)
+        for _ in range(_READS_PER_TURN):
+            try:
+                data = client.sock.recv(_RECV_SIZE)
+            except BlockingIOError:
+                return
+            except OSError:
+                data = b""
+            if not data:
+                self._kill(client, "disconnected")
+                return
+            try:    # acknowledge at once: a client without TCP_NODELAY (python-can's default) holds its
+                    # next small frame until our ACK (Nagle), and Linux delays ACKs up to 40 ms
+                client.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_QUICKACK, 1)
+            except OSError:
+                pass
+            client.buffer += data.decode("ascii", errors="replace")
+            self._parse(client)
+            if client.dead or len(data) < _RECV_SIZE:
+                return
 
     def _parse(self, client: _Client) -> None:
         buf = client.buffer
-        while buf:
+        while buf and not client.dead:
             start = buf.find("<")
             if start < 0:
                 if buf.strip():
@@ -295,8 +378,8 @@ class SocketcandServer:
                 buf = buf[start:]
                 if len(buf) > MAX_COMMAND_LENGTH:
                     self.counters.garbage_commands += 1
-                    log.warning("socketcand hub: client %s sent an endless command; closing it", client.peer)
-                    client.dead = True
+                    log.debug("socketcand hub: client %s sent an endless command; closing it", client.peer)
+                    self._kill(client, "endless command")
                     buf = ""
                 break
             inner = buf[start + 1:end]
@@ -307,21 +390,28 @@ class SocketcandServer:
             self._command(client, inner.split())
         client.buffer = buf
 
+    def _reply(self, client: _Client, text: str) -> None:
+        if len(client.replies) + len(text) > MAX_REPLY_BYTES:
+            self._drop_slow(client, "does not read its replies")
+            return
+        client.replies += text.encode("ascii")
+
     def _command(self, client: _Client, tokens: list[str]) -> None:
         verb = tokens[0] if tokens else ""
         if verb == "open" and len(tokens) == 2 and client.state == "greeted":
             if tokens[1] == self.channel:
                 client.state = "open"
-                self._send_text(client, "< ok >")
+                self._reply(client, "< ok >")
             else:
-                self._send_text(client, "< error could not open bus >")
+                self._reply(client, "< error could not open bus >")
         elif verb == "rawmode" and len(tokens) == 1 and client.state in ("open", "raw"):
-            with client.lock:
-                client.raw_since = time.monotonic()
-                client.state = "raw"
-                self._sendall_locked(client, "< ok >")
+            if client.state != "raw":
+                client.cursor = self._log.head                # frames from now on
+            client.raw_since = time.monotonic()
+            client.state = "raw"
+            self._reply(client, "< ok >")
         elif verb == "echo" and len(tokens) == 1:
-            self._send_text(client, "< echo >")
+            self._reply(client, "< echo >")
         elif verb == "send" and client.state in ("open", "raw"):
             try:
                 msg = parse_send(tokens)
@@ -335,10 +425,82 @@ class SocketcandServer:
                 self._bus.send(msg)
             except can.CanError as exc:
                 log.warning("socketcand hub: in-process send failed: %s", exc)
-            self._broadcast(msg, exclude=client)
+            self._publish(msg, origin=client)
         else:
             self.counters.garbage_commands += 1
             log.debug("socketcand hub: dropped unknown command %r", " ".join(tokens))
+
+    def _flush(self, selector) -> None:
+        """One turn: every client's new frames into its buffer, then what its socket takes."""
+        now = time.monotonic()
+        with self._log.lock:
+            first, entries = self._log.first, list(self._log.entries)
+        head = first + len(entries)
+        for client in self._clients:
+            if client.dead:
+                continue
+            if client.state != "raw":
+                if now - client.accepted > HANDSHAKE_TIMEOUT:
+                    self.counters.handshake_timeouts += 1
+                    self._kill(client, "no handshake")
+                    continue
+            elif now - client.raw_since >= RAWMODE_GRACE and client.cursor < head:
+                if client.cursor < first:
+                    self._drop_slow(client, f"fell {head - client.cursor} frames behind")
+                    continue
+                if len(client.output) < MAX_OUTPUT_BYTES:
+                    taken = [data for origin, data in entries[client.cursor - first:] if origin is not client]
+                    client.cursor = head
+                    client.output += b"".join(taken)
+                    self.counters.frames_to_clients += len(taken)
+            if client.writable and (client.replies or client.output):
+                self._send(client, selector)
+        dead = [c for c in self._clients if c.dead]
+        if dead:
+            self._clients = [c for c in self._clients if not c.dead]
+            for client in dead:
+                try:
+                    selector.unregister(client.sock)
+                except (KeyError, ValueError):
+                    pass
+                self._close_socket(client.sock, reset=client.slow)
+                self.counters.clients_closed += 1
+                log.info("socketcand hub: client %s closed (%s)", client.peer, client.reason)
+
+    def _send(self, client: _Client, selector) -> None:
+        """Send what the kernel takes without waiting; the rest waits for EVENT_WRITE."""
+        for buffer in (client.replies, client.output):
+            if not buffer:
+                continue
+            try:
+                sent = client.sock.send(buffer)
+            except BlockingIOError:
+                sent = 0
+            except OSError as exc:
+                self._kill(client, f"send failed: {exc}")
+                return
+            del buffer[:sent]
+            if buffer:                                        # the kernel is full: wait for it
+                client.writable = False
+                if not client.watch_write:
+                    client.watch_write = True
+                    selector.modify(client.sock, selectors.EVENT_READ | selectors.EVENT_WRITE, client)
+                return
+        if client.watch_write:
+            client.watch_write = False
+            selector.modify(client.sock, selectors.EVENT_READ, client)
+
+    def _drop_slow(self, client: _Client, reason: str) -> None:
+        if not client.dead:
+            self.counters.slow_clients_dropped += 1
+            client.slow = True
+            self._kill(client, reason)
+
+    def _kill(self, client: _Client, reason: str) -> None:
+        """Mark a client for closing at the end of this turn (socket thread only)."""
+        if not client.dead:
+            client.dead = True
+            client.reason = reason
 
     # ------------------------------------------------------------------ frames to clients
 
@@ -346,72 +508,35 @@ class SocketcandServer:
         while not self._stop.is_set():
             try:
                 msg = self._bus.recv(timeout=_BUS_TIMEOUT)
+                if msg is None:
+                    continue
+                while msg is not None:                       # everything queued, one wake-up
+                    self._publish(msg, origin=None)
+                    msg = self._bus.recv(timeout=0.0)
             except Exception as exc:                         # the bus went away: stop quietly
                 if not self._stop.is_set():
                     log.warning("socketcand hub: bus receive failed: %s", exc)
                     time.sleep(_BUS_TIMEOUT)
                 continue
-            if msg is not None:
-                self._broadcast(msg)
+            self._wake()
 
-    def _broadcast(self, msg: can.Message, exclude: _Client | None = None) -> None:
+    def _publish(self, msg: can.Message, origin: _Client | None) -> None:
+        """Append a frame to the log (the socket thread sends it on its next turn)."""
         text = format_frame(msg)
         if text is None:
             self.counters.dropped_frames += 1
             return
-        with self._clients_lock:
-            clients = [c for c in self._clients if c is not exclude and not c.dead and c.state == "raw"]
-        for client in clients:
-            self._deliver(client, text)
-
-    def _flush_pending(self) -> None:
-        with self._clients_lock:
-            clients = [c for c in self._clients if c.pending and not c.dead]
-        for client in clients:
-            self._deliver(client, None)
-
-    def _deliver(self, client: _Client, text: str | None) -> None:
-        """Queue during the rawmode grace time, else send the queue and `text` (in order)."""
-        with client.lock:
-            if time.monotonic() - client.raw_since < RAWMODE_GRACE:
-                if text is not None:
-                    if len(client.pending) == client.pending.maxlen:
-                        self.counters.dropped_frames += 1
-                    client.pending.append(text)
-                return
-            texts = list(client.pending) + ([text] if text is not None else [])
-            client.pending.clear()
-            if texts and self._sendall_locked(client, "".join(texts)):
-                self.counters.frames_to_clients += len(texts)
-
-    def _send_text(self, client: _Client, text: str) -> bool:
-        with client.lock:
-            return self._sendall_locked(client, text)
-
-    def _sendall_locked(self, client: _Client, text: str) -> bool:
-        try:
-            client.sock.sendall(text.encode("ascii"))
-            return True
-        except (OSError, socket.timeout) as exc:
-            if not client.dead:
-                log.info("socketcand hub: client %s gone (%s)", client.peer, exc)
-            client.dead = True
-            self._wake()
-            return False
-
-    def _drop(self, client: _Client) -> None:
-        client.dead = True
-        with self._clients_lock:
-            if client in self._clients:
-                self._clients.remove(client)
-        self._close_socket(client.sock)
-        self.counters.clients_closed += 1
-        log.info("socketcand hub: client %s closed", client.peer)
+        self._log.append(origin, text.encode("ascii"))
 
     @staticmethod
-    def _close_socket(sock: socket.socket) -> None:
+    def _close_socket(sock: socket.socket, reset: bool = False) -> None:
+        """Close; `reset`: with a TCP reset, so the kernel does not keep unsent data for a
+        client that does not read (a FIN would wait behind it)."""
         try:
-            sock.shutdown(socket.SHUT_RDWR)
+            if reset:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            else:
+                sock.shutdown(socket.SHUT_RDWR)
         except OSError:
             pass
         sock.close()

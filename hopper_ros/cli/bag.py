@@ -12,6 +12,7 @@ says it is unfinished, `recover` makes it complete. Format: hopper_ros/recording
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -19,6 +20,9 @@ import time
 HELP = "record topics into a rosbag2 bag (MCAP), show a bag, recover an interrupted one (like `ros2 bag`)"
 
 _POLL_PERIOD = 0.25   # [s] between looks at the graph for new topics
+_FAST_POLL_PERIOD = 0.02   # [s] ... while named topics are still missing (the bag starts sooner)
+_FAST_POLL_FOR = 10.0      # [s] ... during the first seconds only
+_STOP_LATENCY = 0.05       # [s] the recorder's wait for messages: how soon Ctrl-C is seen
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -51,6 +55,18 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _info(args) -> int:
+    from hopper_ros.cli.errors import run_tool
+
+    return run_tool("bag info", [args.bag], lambda: _info_main(args))
+
+
+def _recover(args) -> int:
+    from hopper_ros.cli.errors import run_tool
+
+    return run_tool("bag recover", [args.bag], lambda: _recover_main(args))
+
+
+def _info_main(args) -> int:
     from hopper_ros.recording.bag import BagError, bag_info
 
     try:
@@ -61,7 +77,7 @@ def _info(args) -> int:
     return 0
 
 
-def _recover(args) -> int:
+def _recover_main(args) -> int:
     from hopper_ros.recording.bag import BagError, recover_bag
 
     try:
@@ -93,7 +109,6 @@ def _record(args) -> int:
         return 2
     stop = StopSignals().install()
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
     from hopper_ros.recording.recorder import Recorder
@@ -102,30 +117,45 @@ def _record(args) -> int:
         print(text, file=sys.stderr, flush=True)
 
     node = None
+    recorder = None
     status = 0
     try:
         rclpy.init(args=["hopper"], signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node(f"_hopper_bag_record_{os.getpid()}", start_parameter_services=False)
-        stop.attach(node)
         recorder = Recorder(node, bag, None if args.all else args.topics,
                             include_hidden=args.include_hidden_topics, log=log)
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        log(f"recording to {bag.path} ({'all topics' if args.all else ', '.join(recorder.wanted)}); Ctrl-C stops")
+        started = time.monotonic()
+        log(f"recording to {bag.path} ({'all topics' if args.all else ', '.join(sorted(recorder.wanted))}); "
+            f"Ctrl-C stops")
         end = None if args.duration is None else time.monotonic() + args.duration
         next_look = 0.0
         while stop.received is None and (end is None or time.monotonic() < end):
-            if time.monotonic() >= next_look:
+            now = time.monotonic()
+            if now >= next_look:
                 recorder.discover()
-                next_look = time.monotonic() + _POLL_PERIOD
-            executor.spin_once(timeout_sec=_POLL_PERIOD)
-        executor.shutdown(timeout_sec=1.0)
+                recorder.report_drops()
+                fast = (recorder.missing or not recorder.subscriptions) and now - started < _FAST_POLL_FOR
+                next_look = now + (_FAST_POLL_PERIOD if fast else _POLL_PERIOD)
+            recorder.spin_once(max(0.0, min(next_look - time.monotonic(), _STOP_LATENCY)))
     except Exception as exc:  # noqa: BLE001 - close the bag whatever happened, then report
         log(f"hopper bag record: error: {exc}")
         status = 1
     finally:
         stop.detach()
         try:
+            if recorder is not None:
+                recorder.close()                   # everything received is in the bag
+                dropped = recorder.dropped
+                bag.custom_data["hopper_recorder_dropped"] = json.dumps(dropped, sort_keys=True)
+                if recorder.first_ns is not None:
+                    bag.custom_data["hopper_recorder_first_message_ns"] = str(recorder.first_ns)
+                for line in recorder.summary():
+                    log(line)
+                if any(dropped.values()):
+                    log(f"hopper bag record: DROPPED {sum(dropped.values())} message(s) that never reached the bag "
+                        f"(per topic above)")
+                if recorder.write_error is not None:
+                    status = 1
             bag.close()
             log(f"bag {bag.path} closed: {bag.message_count} messages on {len(bag.topics)} topic(s)")
         except Exception as exc:  # noqa: BLE001

@@ -59,7 +59,8 @@ def _switches(on: str, off: str) -> dict:
 
 
 def main(args: argparse.Namespace) -> int:
-    from hopper_ros.config import load_yaml
+    from hopper_ros.config_schemas import load_hardware
+    from hopper_ros.schema import ConfigError
     from hopper_ros.identification.progress import ProgressBar
     from hopper_ros.recording.bag import BagError
     from hopper_ros.recording.collect import CollectionSettings, collect
@@ -72,10 +73,10 @@ def main(args: argparse.Namespace) -> int:
         config = config.with_effects(**_switches(args.effects, args.no_effects))
         if args.noise:
             config = config.with_sensors(**{name: True for name in SENSORS})
-        hardware = load_yaml(args.hardware)
+        hardware = load_hardware(args.hardware)
     except (ValueError, FileNotFoundError) as exc:
         print(f"hopper collect: error: {exc}", file=sys.stderr)
-        return 2
+        return 1 if isinstance(exc, ConfigError) else 2
     total = args.experiments if args.experiments is not None else args.strides
     bar = ProgressBar(total, "collect")
 

@@ -17,14 +17,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from hopper_ros.cli.errors import run_tool
+
+    return run_tool("diagnose", [args.recording, args.model, args.settings], lambda: _main(args))
+
+
+def _main(args: argparse.Namespace) -> int:
     from hopper_ros.diagnosis import DiagnosisError, diagnose_file
     from hopper_ros.identification.recordings import RecordingError
 
+    from hopper_ros.config_schemas import load_model
+    from hopper_ros.schema import ConfigError
+
     try:
+        load_model(args.model)                          # its schema first: one line naming file and key
         result = diagnose_file(args.recording, args.model, args.output, args.settings, args.json)
     except (DiagnosisError, RecordingError, ValueError, FileNotFoundError, KeyError) as exc:
         print(f"hopper diagnose: error: {exc}", file=sys.stderr)
-        return 2
+        return 1 if isinstance(exc, ConfigError) else 2
     from hopper_ros.diagnosis.core import location_line
 
     print(f"{len(result['data'].strides)} strides, {result['wall_time']:.1f} s")

@@ -40,11 +40,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from hopper_ros.cli.errors import run_tool
+
+    return run_tool("identify", [args.recording, args.config], lambda: _main(args))
+
+
+def _main(args: argparse.Namespace) -> int:
     from hopper_ros.identification.crossval import format_error_table, format_parameter_table
     from hopper_ros.identification.pipeline import identify
     from hopper_ros.identification.recordings import RecordingError
     from hopper_ros.identification.settings import load_settings
     from hopper_ros.recording.bag import BagError
+    from hopper_ros.schema import ConfigError
 
     try:
         settings = load_settings(args.config)
@@ -70,7 +77,7 @@ def main(args: argparse.Namespace) -> int:
                           max_strides=args.max_strides)
     except (RecordingError, BagError, ValueError, FileNotFoundError) as exc:
         print(f"hopper identify: error: {exc}", file=sys.stderr)
-        return 2
+        return 1 if isinstance(exc, ConfigError) else 2
     print(f"{len(result.strides)} strides from {result.recording.source} "
           f"({len(result.strides.rejected)} rejected); phases "
           f"{'labelled' if result.strides.labelled else 'detected'}")

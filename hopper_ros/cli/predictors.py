@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 HELP = "compare the AAS and the corrected AAS with the exact model; write a report (markdown, PNG)"
 
 
@@ -13,11 +15,17 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
-    from hopper_ros.physics.params import load_params
+    from hopper_ros.config_schemas import load_model
     from hopper_ros.reports.predictors import write_predictor_report
+    from hopper_ros.schema import ConfigError
 
     if args.strides < 10:
         raise SystemExit("hopper predictors: --strides must be at least 10")
-    path = write_predictor_report(args.output, load_params(args.model), args.strides, args.seed)
+    try:
+        params = load_model(args.model)
+    except (ConfigError, FileNotFoundError) as exc:
+        print(f"hopper predictors: error: {exc}", file=sys.stderr)
+        return 1
+    path = write_predictor_report(args.output, params, args.strides, args.seed)
     print(f"report written to {path}")
     return 0

@@ -32,12 +32,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from hopper_ros.config import load_yaml
+    from hopper_ros.cli.errors import run_tool
+
+    return run_tool("report", [args.recording or args.output, args.config], lambda: _main(args))
+
+
+def _main(args: argparse.Namespace) -> int:
+    from hopper_ros.config_schemas import load_hardware
     from hopper_ros.identification.grf import simulate_profiles
     from hopper_ros.identification.pipeline import identify
     from hopper_ros.identification.recordings import RecordingError
     from hopper_ros.identification.settings import load_settings
     from hopper_ros.recording.bag import BagError
+    from hopper_ros.schema import ConfigError
     from hopper_ros.recording.collect import CollectionSettings, collect
     from hopper_ros.reports.identification import write_report
     from hopper_ros.sim.config import SENSORS, load_sim_config
@@ -52,7 +59,7 @@ def main(args: argparse.Namespace) -> int:
         if unknown or not methods:
             raise ValueError(f"--predictors: unknown {unknown}; choose from aas, corrected, exact")
         sim_config = load_sim_config().with_sensors(**{name: True for name in SENSORS})
-        hardware = load_yaml("hardware.yaml")
+        hardware = load_hardware("hardware.yaml")
         collection = None
         recording = args.recording
         if recording is None:
@@ -75,7 +82,7 @@ def main(args: argparse.Namespace) -> int:
             forces = simulate_profiles(grf_folder, sim_config, hardware, settings.grf, sim_config.model_params())
     except (RecordingError, BagError, ValueError, FileNotFoundError) as exc:
         print(f"hopper report: error: {exc}", file=sys.stderr)
-        return 2
+        return 1 if isinstance(exc, ConfigError) else 2
     path = write_report(out, result, forces, collection)
     print(f"report written to {path}")
     return 0

@@ -38,7 +38,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from hopper_ros.physics.params import ModelParams
-from hopper_ros.physics.predictors import PREDICTORS, predict_stride
+from hopper_ros.physics.predictors import predict_stride
 
 NEWTON_ITERATIONS = 6
 HEIGHT_TOLERANCE = 5e-4     # [m] stage 1 stops when the AAS apex is this close ...
@@ -67,18 +67,14 @@ class DeadbeatSettings:
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "deadbeat settings") -> "DeadbeatSettings":
-        known = cls.__dataclass_fields__
-        unknown = sorted(set(values) - set(known))
-        if unknown:
-            raise ValueError(f"{source}: unknown setting(s) {unknown}; known: {sorted(known)}")
-        settings = cls(**values)
-        if settings.predictor not in PREDICTORS:
-            raise ValueError(f"{source}: predictor {settings.predictor!r} is not one of {PREDICTORS}")
-        if settings.angle_points < 3 or settings.angle_span <= 0 or settings.torque_step <= 0:
-            raise ValueError(f"{source}: angle_points >= 3, angle_span > 0 and torque_step > 0 needed")
-        if not 0.0 <= settings.adaptation_gain <= 1.0:
-            raise ValueError(f"{source}: adaptation_gain must be in [0, 1], got {settings.adaptation_gain}")
-        return settings
+        """Settings from a `deadbeat` section (missing keys: the defaults), checked by the schema of
+        control.yaml (hopper_ros.config_schemas.CONTROL): types, ranges with units, min < max."""
+        from hopper_ros.config_schemas import CONTROL
+        from hopper_ros.schema import Section, validate
+
+        defaults = {name: getattr(cls, name) for name in cls.__dataclass_fields__}
+        section = Section({"deadbeat": CONTROL.fields["deadbeat"]})
+        return cls(**validate(section, {"deadbeat": {**defaults, **dict(values)}}, source)["deadbeat"])
 
 
 @dataclass
@@ -156,7 +152,13 @@ class DeadbeatController:
         aim_height = target_height - bias[0] - self._defect[0]
         aim_speed = target_speed - bias[1] - self._defect[1]
         angle = self._warm_angle if self._warm_angle is not None else self.neutral_angle(forward_speed)
+        warm_jacobian = self._jacobian
         solved = self._newton(apex_height, forward_speed, aim_height, aim_speed, angle, self._warm_torque)
+        if (solved is None or solved[-1] == "height out of reach") and warm_jacobian is not None:
+            # the last stride's Jacobian (Broyden-updated, then moved by stage 2's refinement) led
+            # Newton astray: once more with a fresh finite-difference Jacobian at the warm start
+            self._jacobian = None
+            solved = self._newton(apex_height, forward_speed, aim_height, aim_speed, angle, self._warm_torque)
         result = self._decision(stride_index, solved, target_height, target_speed, bias, forward_speed)
         if result.feasible:   # what the model (not the AAS) predicts is only known after stage 2
             result.predicted_apex_height, result.predicted_forward_speed = target_height, target_speed

@@ -134,38 +134,78 @@ def write_csv(path: str | os.PathLike, recording: Recording, with_phase: bool = 
     return path
 
 
+MAX_CSV_BYTES = 256 << 20        # [bytes] larger CSV files are refused before reading (about 70 min at 1 kHz)
+MAX_BAG_BYTES = 2 << 30          # [bytes] larger bags are refused before loading their messages
+
+
+def _check_size(path: Path, limit: int, what: str) -> None:
+    size = path.stat().st_size
+    if size > limit:
+        raise RecordingError(f"{path}: {size / 2**20:.1f} MiB is more than this tool loads ({limit >> 20} MiB of "
+                             f"{what}); cut the recording into shorter runs")
+
+
 def load_csv(path: str | os.PathLike) -> Recording:
-    """Read a `t,y,z,theta,tau[,phase]` CSV; errors name the line and column."""
+    """Read a `t,y,z,theta,tau[,phase]` CSV; errors name the file, line and column.
+
+    Bounded memory: the size is checked before reading (MAX_CSV_BYTES), rows are parsed one at a
+    time into compact arrays (8 bytes a value), and a line longer than any row is refused."""
+    import array
+
     path = Path(path)
     if not path.is_file():
         raise RecordingError(f"no such file: {path}")
-    with open(path, newline="", encoding="utf-8") as handle:
-        reader = csv.reader(handle)
-        try:
-            header = [h.strip().lower() for h in next(reader)]
-        except StopIteration:
-            raise RecordingError(f"{path}: empty file") from None
-        missing = [c for c in CSV_COLUMNS if c not in header]
-        if missing:
-            raise RecordingError(f"{path}: header lacks column(s) {missing}; expected {','.join(CSV_COLUMNS)}[,phase]")
-        index = {name: header.index(name) for name in CSV_COLUMNS}
-        phase_index = header.index("phase") if "phase" in header else None
-        rows, phases = [], []
-        for line_number, row in enumerate(reader, start=2):
-            if not row or all(not cell.strip() for cell in row):
-                continue
+    _check_size(path, MAX_CSV_BYTES, "CSV")
+    columns = [array.array("d") for _ in CSV_COLUMNS]
+    phases = array.array("b")
+    line_number = 1
+    try:
+        with open(path, newline="", encoding="utf-8") as handle:
+            reader = csv.reader(_bounded_lines(handle, path))
             try:
-                rows.append([float(row[index[name]]) for name in CSV_COLUMNS])
-            except (ValueError, IndexError):
-                raise RecordingError(f"{path}:{line_number}: expected numbers in {','.join(CSV_COLUMNS)}, "
-                                     f"got {row!r}") from None
-            if phase_index is not None:
-                phases.append(_phase_value(row[phase_index] if phase_index < len(row) else "", path, line_number))
-    if not rows:
+                header = [h.strip().lower() for h in next(reader)]
+            except StopIteration:
+                raise RecordingError(f"{path}: empty file") from None
+            missing = [c for c in CSV_COLUMNS if c not in header]
+            if missing:
+                raise RecordingError(f"{path}: header lacks column(s) {missing}; expected {','.join(CSV_COLUMNS)}[,phase]")
+            index = [header.index(name) for name in CSV_COLUMNS]
+            phase_index = header.index("phase") if "phase" in header else None
+            for line_number, row in enumerate(reader, start=2):
+                if not row or all(not cell.strip() for cell in row):
+                    continue
+                try:
+                    values = [float(row[i]) for i in index]
+                except (ValueError, IndexError):
+                    short = f" ({len(row)} of {len(header)} columns: the file looks cut short)" if len(row) < len(header) else ""
+                    raise RecordingError(f"{path}:{line_number}: expected numbers in {','.join(CSV_COLUMNS)}, "
+                                         f"got {','.join(row)[:80]!r}{short}") from None
+                for column, value in zip(columns, values):
+                    column.append(value)
+                if phase_index is not None:
+                    phases.append(_phase_value(row[phase_index] if phase_index < len(row) else "", path, line_number))
+    except UnicodeDecodeError as exc:
+        raise RecordingError(f"{path}: not a text CSV file (byte 0x{exc.object[exc.start]:02x} near line "
+                             f"{line_number + 1} is not UTF-8)") from None
+    except csv.Error as exc:
+        raise RecordingError(f"{path}:{line_number + 1}: not a CSV row ({exc})") from None
+    if not columns[0]:
         raise RecordingError(f"{path}: no samples")
-    data = np.asarray(rows, dtype=float)
+    data = [np.frombuffer(column, dtype=float) for column in columns]
     phase = np.asarray(phases, dtype=int) if phase_index is not None else None
-    return Recording(*data.T, phase=phase, source=str(path))
+    return Recording(*data, phase=phase, source=str(path))
+
+
+_MAX_LINE = 4096                 # [characters] no row of t,y,z,theta,tau[,phase] comes near it
+
+
+def _bounded_lines(handle, path: Path):
+    """The file's lines, refusing one longer than _MAX_LINE (garbage, or a binary file)."""
+    for number, line in enumerate(iter(lambda: handle.readline(_MAX_LINE + 1), ""), start=1):
+        if len(line) > _MAX_LINE:
+            raise RecordingError(f"{path}:{number}: line longer than {_MAX_LINE} characters: not a "
+                                 f"t,y,z,theta,tau CSV")
+        yield line
 
 
 def _phase_value(cell: str, path, line_number: int) -> int:
@@ -205,6 +245,10 @@ def load_bag(path: str | os.PathLike) -> Recording:
 
     reader = BagReader(path)
     source = str(path)
+    size = sum(f.stat().st_size for f in reader.files)
+    if size > MAX_BAG_BYTES:
+        raise RecordingError(f"{source}: {size / 2**20:.1f} MiB of MCAP is more than this tool loads "
+                             f"({MAX_BAG_BYTES >> 20} MiB); cut the recording into shorter runs")
     payloads = reader.payloads()
     if not payloads:
         raise RecordingError(f"{source}: the bag holds no messages")

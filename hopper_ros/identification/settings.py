@@ -85,73 +85,40 @@ class IdentificationSettings:
         return out
 
 
-def _numbers(section: Mapping[str, Any], cls, where: str):
-    known = {f.name: f for f in fields(cls)}
-    if not isinstance(section, Mapping):
-        raise ValueError(f"{where} must be a mapping")
-    unknown = sorted(set(section) - set(known))
-    if unknown:
-        raise ValueError(f"{where}: unknown key(s) {unknown}; known: {sorted(known)}")
-    values = {}
-    for key, value in section.items():
-        default = getattr(cls, key)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"{where}.{key} must be a number, got {value!r}")
-        values[key] = type(default)(value)
-    return cls(**values)
-
-
 def settings_from_dict(data: Mapping[str, Any], source: str = "identification settings") -> IdentificationSettings:
-    if isinstance(data, Mapping) and "identification" in data:
-        data = data["identification"]
-    if not isinstance(data, Mapping):
-        raise ValueError(f"{source}: expected a mapping under `identification:`")
-    try:
-        initial = ModelParams.from_dict(data["initial"], source=f"{source}: identification.initial")
-        bounds_data = data["bounds"]
-        if not isinstance(bounds_data, Mapping):
-            raise ValueError(f"{source}: identification.bounds must be a mapping")
-        bounds = {}
-        for name, pair in bounds_data.items():
-            if name not in FITTABLE:
-                raise ValueError(f"{source}: identification.bounds.{name}: not a fittable parameter {list(FITTABLE)}")
-            if not (isinstance(pair, (list, tuple)) and len(pair) == 2 and all(isinstance(v, (int, float)) for v in pair)):
-                raise ValueError(f"{source}: identification.bounds.{name} must be [low, high], got {pair!r}")
-            bounds[name] = (float(pair[0]), float(pair[1]))
-        settings = IdentificationSettings(
-            predictor=str(data.get("predictor", "aas")),
-            folds=int(data["folds"]),
-            seed=int(data.get("seed", 0)),
-            fitted=tuple(data["fitted"]),
-            initial=initial,
-            bounds=bounds,
-            nelder_mead=_numbers(data.get("nelder_mead", {}), NelderMeadSettings, f"{source}: identification.nelder_mead"),
-            exact=_numbers(data.get("exact", {}), ExactSettings, f"{source}: identification.exact"),
-            failed_stride_error_pct=float(data.get("failed_stride_error_pct", 100.0)),
-            extraction=ExtractionSettings.from_dict(data.get("extraction", {}), f"{source}: identification.extraction"),
-            grf=_numbers(data.get("grf", {}), GrfSettings, f"{source}: identification.grf"),
-            lanes=_numbers(data.get("lanes", {}), LanesSettings, f"{source}: identification.lanes"),
-            effects=_effect_names(data.get("effects", []), f"{source}: identification.effects"),
-        )
-    except KeyError as exc:
-        raise ValueError(f"{source}: identification.{exc.args[0]} is missing") from None
+    """From the parsed file (with or without the `identification:` level), checked by its schema
+    (hopper_ros.config_schemas.IDENTIFICATION: types, ranges with units, unknown and missing keys),
+    then across keys (`_validate`: bounds, the initial point inside them)."""
+    from hopper_ros.config_schemas import IDENTIFICATION
+    from hopper_ros.schema import validate
+
+    if not (isinstance(data, Mapping) and "identification" in data):
+        data = {"identification": data}
+    d = validate(IDENTIFICATION, data, source)["identification"]
+    settings = IdentificationSettings(
+        predictor=d["predictor"],
+        folds=d["folds"],
+        seed=d["seed"],
+        fitted=tuple(d["fitted"]),
+        initial=ModelParams.from_dict(d["initial"], source=f"{source}: identification.initial"),
+        bounds={name: (pair[0], pair[1]) for name, pair in d["bounds"].items()},
+        nelder_mead=NelderMeadSettings(**d["nelder_mead"]),
+        exact=ExactSettings(**d["exact"]),
+        failed_stride_error_pct=d["failed_stride_error_pct"],
+        extraction=ExtractionSettings.from_dict(d["extraction"], f"{source}: identification.extraction"),
+        grf=GrfSettings(**d["grf"]),
+        lanes=LanesSettings(**d["lanes"]),
+        effects=tuple(d["effects"]),
+    )
     _validate(settings, source)
     return settings
 
 
-def _effect_names(value, where: str) -> tuple[str, ...]:
-    if value is None:
-        return ()
-    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
-        raise ValueError(f"{where} must be a list of effect names, got {value!r}")
-    return tuple(value)
-
-
 def _validate(s: IdentificationSettings, source: str) -> None:
     if s.predictor not in IDENTIFICATION_PREDICTORS:
-        raise ValueError(f"{source}: predictor {s.predictor!r} is not one of {IDENTIFICATION_PREDICTORS}")
+        raise ValueError(f"{source}: identification.predictor: {s.predictor!r} is not one of {IDENTIFICATION_PREDICTORS}")
     if s.folds < 2:
-        raise ValueError(f"{source}: folds must be at least 2, got {s.folds}")
+        raise ValueError(f"{source}: identification.folds: must be at least 2, got {s.folds}")
     unknown = [name for name in s.fitted if name not in FITTABLE]
     if unknown or not s.fitted:
         raise ValueError(f"{source}: fitted must name some of {list(FITTABLE)}, got {list(s.fitted)}")
@@ -159,13 +126,13 @@ def _validate(s: IdentificationSettings, source: str) -> None:
         raise ValueError(f"{source}: fitted names a parameter twice: {list(s.fitted)}")
     for name in s.fitted:
         if name not in s.bounds:
-            raise ValueError(f"{source}: fitted parameter {name} has no bounds")
+            raise ValueError(f"{source}: identification.bounds.{name}: missing (fitted parameters need bounds)")
         low, high = s.bounds[name]
         if not 0.0 < low < high:
             raise ValueError(f"{source}: bounds of {name} must be 0 < low < high, got [{low}, {high}]")
         value = getattr(s.initial, name)
         if not low <= value <= high:
-            raise ValueError(f"{source}: initial {name} = {value} is outside its bounds [{low}, {high}]")
+            raise ValueError(f"{source}: identification.initial.{name}: {value:g} is outside its bounds [{low:g}, {high:g}]")
     if s.nelder_mead.max_evaluations < 10 or s.nelder_mead.initial_step <= 0:
         raise ValueError(f"{source}: nelder_mead needs max_evaluations >= 10 and a positive initial_step")
     lanes = s.lanes
@@ -180,8 +147,12 @@ def _validate(s: IdentificationSettings, source: str) -> None:
         try:
             check_effects(s.effects, s.fitted)
         except ValueError as exc:
-            raise ValueError(f"{source}: {exc}") from None
+            text = str(exc)
+            raise ValueError(f"{source}: identification.{text}" if text.startswith("effects:")
+                             else f"{source}: identification.effects: {text}") from None
 
 
 def load_settings(name: str | os.PathLike = DEFAULT_FILE) -> IdentificationSettings:
-    return settings_from_dict(load_yaml(name), source=str(name))
+    from hopper_ros.config import config_path
+
+    return settings_from_dict(load_yaml(name), source=str(config_path(name)))

@@ -28,7 +28,7 @@ import traceback
 from typing import Callable, Sequence
 
 from hopper_ros.environment import (RosEnvironmentError, apply_realtime_priority, apply_ros_environment,
-                                    discovery_range)
+                                    dds_network)
 
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _SPIN_PERIOD = 1.0  # [s] the executor wakes at least this often (belt and braces, see StopSignals)
@@ -163,7 +163,7 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
                 stop.attach(node)
             node.get_logger().info(
                 f"started: pid {os.getpid()}, ROS_DOMAIN_ID {node.context.get_domain_id()}, "
-                f"discovery range {discovery_range()}"
+                f"discovery range {dds_network()}"
             )
             node.get_logger().info(f"scheduling: {scheduling}")
             executor.add_node(node)

@@ -23,7 +23,7 @@ itself reaches the node only after the sensing chain's latency. No touchdown wit
 
 A MotorCommand goes out at once when an input changes it (apex, gait event, setpoint, fault) and
 is repeated every `keep_alive` otherwise (a timer), which feeds the motor driver's watchdog; the
-node needs no state estimates, so it wakes at 200 Hz instead of with every 1 kHz sample. In
+node needs no state estimates, so it wakes at 333 Hz instead of with every 1 kHz sample. In
 stance it is MODE_RAMP stamped with the touchdown time: the driver computes the ramp's current
 every SYNC period itself, so delays and jitter of the command stream (seven Python processes on
 two cores) neither shift nor stretch it; the stride phase advances on `gait_event`. The logic is in
@@ -31,7 +31,9 @@ hopper_ros.control (no ROS); this node only connects it.
 
 Parameters (read only): model_file (model.yaml), config_file (control.yaml), experiment,
 tau_0, touchdown_angle, adaptation (overrides control.yaml), keep_alive (an unchanged command is
-repeated this often, 5 ms: well inside the driver's 20 ms watchdog).
+repeated this often; default control.yaml `stride.keep_alive`, 3 ms, chosen with the driver's
+10 ms `command_timeout`: one lost repeat never trips it, a lost stream has the drive disabled
+within 20 ms).
 """
 
 from __future__ import annotations
@@ -43,7 +45,9 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from hopper_ros.config import load_yaml
+from hopper_ros.config import config_path
+from hopper_ros.config_schemas import CONTROL, load_model
+from hopper_ros.schema import load_config
 from hopper_ros.control.closed_loop import decide_at_apex
 from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings, StrideDecision
 from hopper_ros.control.stride_machine import Phase, StrideMachine, StridePlan
@@ -52,7 +56,6 @@ from hopper_ros.nodes.common import run_node
 from hopper_ros.nodes.diagnostics import (DIAGNOSTICS_TOPIC, ERROR, OK, WARN, DiagnosticsReporter, level_of,
                                           split_node_name)
 from hopper_ros.physics.flight import touchdown_time
-from hopper_ros.physics.params import load_params
 from hopper_ros.physics.predictors import predict_stride
 from hopper_ros.sensing.messages import to_time
 
@@ -76,12 +79,13 @@ class DeadbeatControllerNode(Node):
         tau_0 = param("tau_0", math.nan, "single stride: initial torque [N m]")
         touchdown_angle = param("touchdown_angle", math.nan, "single stride: touchdown angle [rad]")
         adaptation = param("adaptation", "", "override control.yaml: true or false")
-        self.keep_alive = param("keep_alive", 0.005, "[s] an unchanged motor command is repeated this often")
         self._last_sent = -math.inf
         self._touchdown_stamp = None
-        config = load_yaml(config_file)
+        config = load_config(config_file, CONTROL)
         settings = dict(config.get("deadbeat", {}))
         stride = config.get("stride", {})
+        self.keep_alive = param("keep_alive", float(stride.get("keep_alive", 0.003)),
+                                "[s] an unchanged motor command is repeated this often (control.yaml stride.keep_alive)")
         self.ramp_ahead = bool(stride.get("ramp_ahead", False))
         self.touchdown_grace = float(stride.get("touchdown_grace", 0.02))
         self._predicted_touchdown = math.nan
@@ -90,8 +94,8 @@ class DeadbeatControllerNode(Node):
             if adaptation not in ("true", "false"):
                 raise ValueError(f"adaptation must be true or false, got {adaptation!r}")
             settings["adaptation"] = adaptation == "true"
-        self.params = load_params(model_file)
-        self.controller = DeadbeatController(self.params, DeadbeatSettings.from_mapping(settings, config_file))
+        self.params = load_model(model_file)
+        self.controller = DeadbeatController(self.params, DeadbeatSettings.from_mapping(settings, str(config_path(config_file))))
         self.machine = StrideMachine()
         if self.experiment == "single_stride":
             if not (math.isfinite(tau_0) and math.isfinite(touchdown_angle)):

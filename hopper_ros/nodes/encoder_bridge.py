@@ -32,7 +32,7 @@ import time
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
-from hopper_ros.config import load_yaml
+from hopper_ros.config_schemas import load_hardware
 from hopper_ros.msg import BodyMeasurement, EncoderSample
 from hopper_ros.nodes.common import run_node
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
@@ -52,7 +52,7 @@ class EncoderBridgeNode(Node):
         param = lambda name, default, text: self.declare_parameter(  # noqa: E731
             name, default, ParameterDescriptor(description=text, read_only=True)).value
         config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
-        hardware = load_yaml(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
+        hardware = load_hardware(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
                              config.hardware_file)
         microcontroller = hardware["microcontroller"]
         host = param("host", "", "address to listen on ('' = hardware.yaml)") or str(microcontroller["host"])

@@ -28,8 +28,8 @@ from rclpy.node import Node
 
 from hopper_ros.msg import ApexState, BodyState, GaitEvent
 from hopper_ros.nodes.common import run_node
+from hopper_ros.config_schemas import load_model
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
-from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.sensing.events import EventDetector
 from hopper_ros.sensing.messages import (CounterDeltas, any_of, apex_state_msg,
@@ -48,7 +48,7 @@ class EventDetectorNode(Node):
         config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
         model_file = param("model_file", "", "model parameters (YAML), '' = the sensing file's") or config.model_file
         period = param("diagnostics_period", 0.0, "[s] diagnostics period (0 = sensing file)") or config.diagnostics_period
-        self.detector = EventDetector(load_params(model_file), config.detector)
+        self.detector = EventDetector(load_model(model_file), config.detector)
         self._events = self.create_publisher(GaitEvent, "gait_event", sample_qos(EVENT_DEPTH))
         self._apexes = self.create_publisher(ApexState, "apex", 10)
         self._diagnostics = DiagnosticsReporter(self)

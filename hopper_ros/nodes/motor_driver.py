@@ -190,9 +190,19 @@ class MotorDriverNode(Node):
                     self._overruns += 1
                     next_cycle = time.monotonic()
                 while not self._stop.is_set():
-                    remaining = next_cycle - time.monotonic()
+                    now = time.monotonic()
+                    remaining = next_cycle - now
                     if remaining <= 0:
                         break
+                    with self._lock:
+                        deadline = driver.watchdog_deadline()
+                    if deadline <= now:                 # the command stream stopped: act now,
+                        with self._lock:                #   not at the next cycle
+                            driver.watchdog()
+                            events = driver.drain_events()
+                        self._log(events)
+                        continue
+                    remaining = min(remaining, deadline - now + 1e-4)
                     try:
                         frame = bus.recv(timeout=remaining)
                     except (can.CanError, OSError, ValueError) as exc:

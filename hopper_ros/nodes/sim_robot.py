@@ -42,7 +42,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from builtin_interfaces.msg import Time as TimeMsg
 
-from hopper_ros.config import load_yaml
+from hopper_ros.config_schemas import load_hardware
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.msg import ApexState, BodyState, GaitEvent, GroundReactionForce
 from hopper_ros.nodes.common import run_node
@@ -58,23 +58,24 @@ RESYNC_LATENESS = 0.05     # [s] further behind than this, real-time mode stops 
 
 
 def open_drive(can_setting: str, hardware: dict, port: int):
-    """The emulated EPOS2 on the bus `can_setting` names; returns (drive, closer) or (None, None)."""
+    """The emulated EPOS2 on the bus `can_setting` names; returns (drive, closer, hub or None),
+    (None, None, None) for no drive."""
     if can_setting == "none":
-        return None, None
+        return None, None, None
     import can
 
     from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 
     if can_setting.startswith("virtual:"):
         bus = can.Bus(interface="virtual", channel=can_setting.split(":", 1)[1], receive_own_messages=False)
-        return Epos2Emulator(bus, hardware), bus.shutdown
+        return Epos2Emulator(bus, hardware), bus.shutdown, None
     if can_setting == "hub":
         from hopper_ros.canbus.socketcand_server import SocketcandServer
 
         settings = hardware["can"]
         server = SocketcandServer(host=settings["host"], port=port, channel=settings["channel"])
         server.start()
-        return Epos2Emulator(server.local_bus(), hardware), server.close
+        return Epos2Emulator(server.local_bus(), hardware), server.close, server
     raise ValueError(f"can must be 'hub', 'virtual:CHANNEL' or 'none', got {can_setting!r}")
 
 
@@ -87,7 +88,7 @@ class SimRobotNode(Node):
         hardware_file = param("hardware_file", "hardware.yaml", "hardware configuration (YAML)")
         self.mode = param("mode", "realtime", "realtime or lockstep")
         can_setting = param("can", "hub", "hub, virtual:CHANNEL or none")
-        hardware = load_yaml(hardware_file)
+        hardware = load_hardware(hardware_file)
         can_port = param("can_port", int(hardware["can"]["port"]), "TCP port of the CAN hub on 127.0.0.1")
         udp_host = param("udp_host", str(hardware["microcontroller"]["host"]), "where the encoder packets go")
         udp_port = param("udp_port", int(hardware["microcontroller"]["port"]), "UDP port of the encoder packets")
@@ -116,11 +117,12 @@ class SimRobotNode(Node):
 
         if experiments and can_setting != "none":
             raise ValueError("experiments:=true runs the hip itself: it needs can:=none (no drive on a bus)")
-        self.drive, self._close_drive = open_drive(can_setting, hardware, can_port)
+        self.drive, self._close_drive, self.hub = open_drive(can_setting, hardware, can_port)
         self.robot = SimRobot(config, hardware, drive=self.drive)
         self.robot.throw(apex_height, forward_speed, leg_angle, lead_time=self.throw_lead, hold=hold)
         self.series = ExperimentSeries(self.robot, seed=config.seed) if experiments else None
         self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._udp.bind(("127.0.0.1", 0))            # a sender on loopback only, not on 0.0.0.0
         self._udp_address = ("127.0.0.1", int(udp_port))
         self._force_msg = GroundReactionForce()
         self._force_msg.header.frame_id = "force_plate"
@@ -239,6 +241,8 @@ class SimRobotNode(Node):
         counters = dict(self.counters)
         if self.drive is not None:
             counters.update({f"drive_{k}": v for k, v in dataclasses.asdict(self.drive.counters).items()})
+        if self.hub is not None:         # clients dropped for not reading, garbage, ...
+            counters.update({f"hub_{k}": v for k, v in dataclasses.asdict(self.hub.counters).items()})
         self._diagnostics.report(counters, {"sim_time_s": self.robot.t, "realtime_factor": self.realtime_factor()},
                                  "the robot fell" if counters["falls"] else "", WARN if counters["falls"] else OK)
 

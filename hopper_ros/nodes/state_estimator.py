@@ -27,7 +27,7 @@ import time
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
-from hopper_ros.config import load_yaml
+from hopper_ros.config_schemas import load_hardware
 from hopper_ros.msg import BodyMeasurement, BodyState
 from hopper_ros.nodes.common import run_node
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
@@ -47,7 +47,7 @@ class StateEstimatorNode(Node):
         param = lambda name, default, text: self.declare_parameter(  # noqa: E731
             name, default, ParameterDescriptor(description=text, read_only=True)).value
         config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
-        hardware = load_yaml(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
+        hardware = load_hardware(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
                              config.hardware_file)
         period = param("diagnostics_period", 0.0, "[s] diagnostics period (0 = sensing file)") or config.diagnostics_period
         self.estimator = StateEstimator.from_config(config.estimator, hardware)

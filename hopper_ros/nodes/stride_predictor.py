@@ -23,8 +23,8 @@ from rclpy.time import Time
 
 from hopper_ros.msg import ApexState, StrideCommand
 from hopper_ros.nodes.common import run_node
+from hopper_ros.config_schemas import load_model
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
-from hopper_ros.physics.params import load_params
 from hopper_ros.physics.predictors import DEFAULT_PREDICTOR
 from hopper_ros.stride_monitor import Apex, Command, StrideMonitor
 
@@ -39,7 +39,7 @@ class StridePredictor(Node):
         read_only = lambda text: ParameterDescriptor(description=text, read_only=True)
         model_file = self.declare_parameter("model_file", "model.yaml", read_only("model parameters (YAML)")).value
         method = self.declare_parameter("predictor", DEFAULT_PREDICTOR, read_only("corrected, aas or exact")).value
-        self._monitor = StrideMonitor(load_params(model_file), method)
+        self._monitor = StrideMonitor(load_model(model_file), method)
         self._predicted = self.create_publisher(ApexState, "predicted_apex", 10)
         self._diagnostics = DiagnosticsReporter(self)
         self._problem = ""

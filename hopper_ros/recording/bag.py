@@ -329,7 +329,12 @@ class McapScan:
     metadata: dict = field(default_factory=dict)      # name -> mapping (MCAP metadata records)
 
 
+MAX_CHUNK_BYTES = 256 << 20       # [bytes] a chunk larger than this (uncompressed) is taken as damaged
+
+
 def _decompress(chunk: Chunk) -> bytes:
+    if not 0 <= chunk.uncompressed_size <= MAX_CHUNK_BYTES:
+        raise BagError(f"chunk claims {chunk.uncompressed_size} bytes uncompressed (at most {MAX_CHUNK_BYTES} are read)")
     if chunk.compression == "zstd":
         import zstandard
 
@@ -399,6 +404,9 @@ def _iter_mcap(path: Path, scan: McapScan) -> Iterator[tuple]:
             if offset + 9 + length > size:
                 scan.problem = f"the last record ({name}) is cut short at byte {size} (the recording was interrupted)"
                 return
+            if length > MAX_CHUNK_BYTES:
+                scan.problem = f"damaged {name} record at byte {offset}: {length} bytes long (at most {MAX_CHUNK_BYTES} are read)"
+                return
             body = handle.read(length)
             stream = ReadDataStream(io.BytesIO(body))
             try:
@@ -451,13 +459,13 @@ def _bag_files(path: Path) -> tuple[dict | None, list[Path]]:
     meta_path = path / "metadata.yaml"
     document = None
     if meta_path.exists():
-        try:
-            document = yaml.safe_load(meta_path.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
-        except (yaml.YAMLError, KeyError, TypeError) as exc:
-            raise BagError(f"{meta_path}: not a rosbag2 metadata file ({exc})") from None
+        document = _read_metadata(meta_path)
         if document.get("storage_identifier") != "mcap":
             raise BagError(f"{path}: storage {document.get('storage_identifier')!r} is not supported (mcap only)")
-        files = [path / Path(name).name for name in document.get("relative_file_paths", [])]
+        names = document.get("relative_file_paths", [])
+        if not isinstance(names, list) or not all(isinstance(name, str) and name for name in names):
+            raise BagError(f"{meta_path}: relative_file_paths must be a list of file names, got {names!r}"[:300])
+        files = [path / Path(name).name for name in names]
         missing = [str(f) for f in files if not f.exists()]
         if missing:
             raise BagError(f"{path}: metadata.yaml lists missing file(s) {missing}")
@@ -466,6 +474,28 @@ def _bag_files(path: Path) -> tuple[dict | None, list[Path]]:
     if not files:
         raise BagError(f"{path} holds neither metadata.yaml nor an .mcap file: not a bag")
     return None, files
+
+
+_MAX_METADATA_BYTES = 16 << 20   # [bytes] a metadata.yaml larger than this is not one
+
+
+def _read_metadata(meta_path: Path) -> dict:
+    """The `rosbag2_bagfile_information` mapping of a metadata.yaml; BagError naming the file otherwise."""
+    if meta_path.stat().st_size > _MAX_METADATA_BYTES:
+        raise BagError(f"{meta_path}: {meta_path.stat().st_size / 1e6:.0f} MB is not a rosbag2 metadata file")
+    try:
+        loaded = yaml.safe_load(meta_path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise BagError(f"{meta_path}: not a rosbag2 metadata file (byte {exc.start} is not UTF-8 text)") from None
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        at = f" at line {where.line + 1}" if where is not None else ""
+        raise BagError(f"{meta_path}: not a rosbag2 metadata file (invalid YAML{at}: "
+                       f"{getattr(exc, 'problem', None) or type(exc).__name__})") from None
+    document = loaded.get("rosbag2_bagfile_information") if isinstance(loaded, dict) else None
+    if not isinstance(document, dict):
+        raise BagError(f"{meta_path}: not a rosbag2 metadata file (no `rosbag2_bagfile_information` mapping)")
+    return document
 
 
 class BagReader:
@@ -631,9 +661,10 @@ def recover_bag(path: str | os.PathLike) -> Recovery:
         raise BagError(f"{folder}: recovery handles one MCAP file per bag, found {len(files)}")
     source = files[0]
     scan = McapScan(source)
-    messages = list(_iter_mcap(source, scan))
+    count = sum(1 for _ in _iter_mcap(source, scan))           # first pass: counts only (bounded memory)
     if scan.complete and document is not None:
-        return Recovery(folder, True, len(messages), None, 0, "")
+        return Recovery(folder, True, count, None, 0, "")
+    messages = _Replay(source)                                  # second pass: streamed again where needed
     size = source.stat().st_size
     topics: dict[str, TopicInfo] = {}
     custom = {}
@@ -656,7 +687,7 @@ def recover_bag(path: str | os.PathLike) -> Recovery:
         writer.start(profile="ros2", library="hopper_ros recording (recovered)")
         schema_ids, channel_ids = {}, {}
         for channel_id, log_time, publish_time, sequence, data in messages:
-            channel = scan.channels[channel_id]
+            channel = _channel(scan, channel_id, source)
             if channel_id not in channel_ids:
                 schema = scan.schemas.get(channel.schema_id)
                 if schema is not None and schema.id not in schema_ids:
@@ -675,13 +706,30 @@ def recover_bag(path: str | os.PathLike) -> Recovery:
         os.replace(temporary, source)
         recovered = source
     _write_metadata_file(folder, metadata_document(recovered.name, topics, start, end, custom))
-    return Recovery(folder, False, len(messages), kept, size - scan.good_bytes, scan.problem)
+    return Recovery(folder, False, count, kept, size - scan.good_bytes, scan.problem)
+
+
+def _channel(scan: McapScan, channel_id: int, path) -> Channel:
+    channel = scan.channels.get(channel_id)
+    if channel is None:
+        raise BagError(f"{path}: message on unknown channel {channel_id}")
+    return channel
+
+
+class _Replay:
+    """The messages of an MCAP file, read again on every iteration (never all held in memory)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __iter__(self):
+        return _iter_mcap(self.path, McapScan(self.path))
 
 
 def _count_topics(messages, scan: McapScan, topics: dict) -> tuple[int, int]:
     start, end = None, 0
     for channel_id, log_time, *_ in messages:
-        channel = scan.channels[channel_id]
+        channel = _channel(scan, channel_id, scan.path)
         info = topics.get(channel.topic)
         if info is None:
             schema = scan.schemas.get(channel.schema_id)

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from hopper_ros.physics.params import ModelParams, load_params
+from hopper_ros.physics.params import ModelParams
 
 from .bridge import BridgeSample, EncoderBridge
 from .config import SensingConfig, load_sensing_config
@@ -34,11 +34,11 @@ class SensingPipeline:
     @classmethod
     def from_files(cls, sensing_file: str = "sensing.yaml", hardware: Mapping[str, Any] | None = None,
                    model_file: str | None = None) -> "SensingPipeline":
-        from hopper_ros.config import load_yaml
+        from hopper_ros.config_schemas import load_hardware, load_model
 
         config = load_sensing_config(sensing_file)
-        return cls(config, hardware if hardware is not None else load_yaml(config.hardware_file),
-                   load_params(model_file or config.model_file))
+        return cls(config, hardware if hardware is not None else load_hardware(config.hardware_file),
+                   load_model(model_file or config.model_file))
 
     def process(self, datagram: bytes, receive_time: float) -> PipelineOutput:
         sample = self.bridge.process(datagram, receive_time)

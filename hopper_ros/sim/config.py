@@ -23,7 +23,6 @@ import os
 from dataclasses import dataclass, fields
 from typing import Any, Mapping
 
-from hopper_ros.config import load_yaml
 from hopper_ros.physics import effects as library
 from hopper_ros.physics import laws
 from hopper_ros.physics.params import ModelParams
@@ -221,4 +220,17 @@ class SimConfig:
 
 
 def load_sim_config(name: str | os.PathLike = DEFAULT_FILE) -> SimConfig:
-    return SimConfig.from_dict(load_yaml(name), source=str(name))
+    """The file checked by its schema (hopper_ros.config_schemas.SIM: everything but sim.effects,
+    which `from_dict` checks against the effect library), then built; either's errors are
+    ConfigError, one line naming the file and the key."""
+    from hopper_ros.config import config_path
+    from hopper_ros.config_schemas import SIM
+    from hopper_ros.schema import ConfigError, load_config
+
+    data = load_config(name, SIM)
+    try:
+        return SimConfig.from_dict(data, source=str(config_path(name)))
+    except ConfigError:
+        raise
+    except ValueError as exc:
+        raise ConfigError(" ".join(str(exc).split())) from None
