@@ -53,9 +53,9 @@ def test_the_validator_names_the_key_and_converts():
 
 
 @pytest.mark.parametrize("name,schema", [
-    ("hardware.yaml", HARDWARE), ("launch/hardware_500hz.yaml", HARDWARE), ("model.yaml", MODEL), ("sim.yaml", SIM),
+    ("hardware.yaml", HARDWARE), ("demo/hardware_500hz.yaml", HARDWARE), ("model.yaml", MODEL), ("sim.yaml", SIM),
     ("sensing.yaml", SENSING), ("control.yaml", CONTROL), ("motor_driver.yaml", MOTOR_DRIVER),
-    ("launch/motor_driver_demo.yaml", MOTOR_DRIVER), ("identification.yaml", IDENTIFICATION),
+    ("demo/motor_driver.yaml", MOTOR_DRIVER), ("identification.yaml", IDENTIFICATION),
     ("setpoints/fig5_5.yaml", SCHEDULE)])
 def test_every_shipped_config_file_passes_its_schema(name, schema):
     load_config(name, schema)
