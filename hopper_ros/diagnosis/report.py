@@ -33,6 +33,16 @@ def _finite(value):
     return value
 
 
+def _entry(r: dict) -> dict:
+    c = r["candidate"]
+    entry = {"name": c.name, "kind": c.kind, "family": c.family, "site": c.site, "magnitude": _num(r["magnitude"]),
+             "unit": c.unit, "words": c.describe(r["value"]), "equation": c.equation}
+    if c.discovery is not None:
+        entry["terms"] = [{"term": key, "coefficient": coef * r["value"], "unit": unit, "words": words}
+                          for key, coef, words, unit in c.discovery.terms()]
+    return entry
+
+
 def verdict_entries(result: dict) -> list[dict]:
     """The accepted effects as plain data (what --json writes under "verdict")."""
     out = []
@@ -42,6 +52,7 @@ def verdict_entries(result: dict) -> list[dict]:
                  "magnitude": _num(r["magnitude"]), "unit": c.unit, "words": c.describe(r["value"]),
                  "equation": c.equation, "held_out_trajectory_reduction": r["reduction"],
                  "not_separable_from": [t["name"] for t in r.get("ties", [])],
+                 "look_alikes": [_entry(t) for t in r.get("ties", [])],
                  "to_separate": sorted({c.separate, *(t["candidate"].separate for t in r.get("ties", []))} - {""})}
         if c.discovery is not None:
             entry["terms"] = [{"term": key, "coefficient": coef * r["value"], "unit": unit, "words": words}
