@@ -153,11 +153,11 @@ def test_foxglove_decodes_every_message_of_a_bag_recorded_from_the_node_graph(rc
             node.wait_for_line(r"started: pid")
         recorder = hopper_cli("bag", "record", "-a", "-o", str(tmp_path / "bag"))
         for topic in ("/body_state", "/gait_event", "/diagnostics", "/rosout"):
-            recorder.wait_for_line(rf"recording {topic} \[")
+            recorder.wait_for_line(rf"subscribed to {topic} \[")
         sim = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=none", "-p", "experiments:=true",
                          "-p", f"udp_port:={port}", "-p", "duration:=4.0", "-p", "publish_truth:=false",
                          "-p", "force_plate:=false")
-        recorder.wait_for_line(r"recording /sim/events \[hopper_ros/msg/GaitEvent\]")
+        recorder.wait_for_line(r"subscribed to /sim/events \[hopper_ros/msg/GaitEvent\]")
         assert spin_until(executor, lambda: sim.process.poll() is not None, SAFETY_TIMEOUT)
         assert sim.wait() == 0, sim.stderr
         spin_until(executor, lambda: False, 1.5)          # the last reports
@@ -181,7 +181,7 @@ def test_foxglove_decodes_every_message_of_a_bag_recorded_from_the_node_graph(rc
     assert types["/rosout"] == "rcl_interfaces/msg/Log" and counts["/rosout"] > 0
     for topic in ("/body_measurement", "/encoder_sample", "/body_state", "/gait_event", "/apex", "/sim/events"):
         assert counts.get(topic, 0) > 0, topic
-    assert counts["/body_state"] > 2000                     # 1 kHz for seconds
+    assert counts["/body_state"] > 1000                     # 1 kHz for over a second (decoding, not throughput)
 
     dumps = result["dumps"]
     # every diagnostics report in the bag is one the listener got, field by field
