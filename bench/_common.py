@@ -47,3 +47,14 @@ class Paced:
     @property
     def rate_hz(self):
         return (self.count - 1) / self.elapsed if self.elapsed else 0.0
+
+
+def serve_emulated_drive(drive, stop):
+    """Run an emulated EPOS2 (`Epos2Emulator`) every 0.5 ms until `stop` is set: a thread target."""
+    import time
+
+    while not stop.is_set():
+        now = time.monotonic()
+        drive.poll(now)
+        drive.control(now, 0, 0.0, drive.demand)
+        time.sleep(0.0005)

@@ -39,7 +39,7 @@ import threading
 import time
 from pathlib import Path
 
-from _common import Paced, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
+from _common import Paced, child_env, percentile, serve_emulated_drive  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -88,13 +88,6 @@ def _watchdog(quick):
     drive_bus, spy_bus = hub.local_bus(), hub.local_bus()
     drive = Epos2Emulator(drive_bus, hardware)
 
-    def serve_drive():
-        while not stop.is_set():
-            now = time.monotonic()
-            drive.poll(now)
-            drive.control(now, 0, 0.0, drive.demand)
-            time.sleep(0.0005)
-
     def spy():
         while not stop.is_set():
             frame = spy_bus.recv(timeout=0.05)
@@ -107,7 +100,8 @@ def _watchdog(quick):
             elif frame.arbitration_id == tpdo1 and len(frame.data) >= 2:
                 frames.append((stamp, "tpdo", decode_statusword(struct.unpack("<H", frame.data[:2])[0]), 0))
 
-    threads = [threading.Thread(target=serve_drive, daemon=True), threading.Thread(target=spy, daemon=True)]
+    threads = [threading.Thread(target=serve_emulated_drive, args=(drive, stop), daemon=True),
+               threading.Thread(target=spy, daemon=True)]
     for thread in threads:
         thread.start()
     node = subprocess.Popen(
