@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -413,7 +413,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     fold = _folds(len(data.strides), settings.folds)
     current, current_sse = base, base_sim["sse"][0]
     base_errors = current_errors = _errors(data, {k: v[0] for k, v in base_sim["pred"].items()})
-    chosen, rounds, ties_all, discoveries = [], [], [], []
+    chosen, rounds, discoveries = [], [], []
     first_location = None
     for round_index in range(settings.max_effects):
         locations, sets = locate(data, current)

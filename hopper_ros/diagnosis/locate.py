@@ -188,10 +188,6 @@ def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients)
     return out
 
 
-def _stride_coefficients(variant: Variant) -> laws.Coefficients:
-    return variant.coefficients
-
-
 def twins(data: StrideData, variant: Variant, seed: int = 0):
     """The model's own versions of the recorded strides: (clean, noisy) lists of (t, y, z, theta) per stride,
     t from the apex, with the recording's sensor noise and quantisation on the noisy one."""
