@@ -9,8 +9,9 @@
   (sensor faults named on physics-only recordings)
 - on the independent plant (test/independent_plant/, bench/diagnosis_suite.py): the same as
   diagnose_independent_hit_rate_pct, diagnose_independent_false_positive_pct,
-  diagnose_independent_locate_pct, diagnose_independent_worse_count (recordings whose held-out
-  E_p/E_v/E_t got worse after an accepted effect)
+  diagnose_independent_locate_pct, diagnose_independent_pair_hit_rate_pct (both effects of the
+  recordings with two), diagnose_independent_worse_count (recordings whose held-out E_p/E_v/E_t got
+  worse after an accepted effect)
 --quick: the timing and a few cases of each.
 """
 import sys
@@ -29,7 +30,7 @@ import diagnosis_suite  # noqa: E402
 from hopper_ros.diagnosis import diagnose_file  # noqa: E402
 
 QUICK_SIM = ("clean_a", "leg_friction", "torque_gain", "quadratic_drag+torque_gain")
-QUICK_INDEPENDENT = ("clean_1", "flight_air_drag", "actuator_gain", "other_flight_lift")
+QUICK_INDEPENDENT = ("clean_1", "flight_air_drag", "actuator_gain", "other_flight_lift", "pair_drag_gain")
 
 
 def run(quick=False):
@@ -51,6 +52,8 @@ def run(quick=False):
              {"name": "diagnose_independent_false_positive_pct", "value": round(ind["false_positive_pct"], 1),
               "unit": "%"},
              {"name": "diagnose_independent_locate_pct", "value": round(ind["locate_hit_rate_pct"], 1), "unit": "%"},
+             {"name": "diagnose_independent_pair_hit_rate_pct", "value": round(ind["pair_hit_rate_pct"], 1),
+              "unit": "%"},
              {"name": "diagnose_independent_worse_count", "value": len(ind["worse_after"]), "unit": "recordings"}]
     return rows
 

@@ -33,7 +33,8 @@ SENSOR_FAULTS = {"z_delay": 0.004, "y_delay": 0.004, "theta_delay": 0.004, "z_sc
 PAIRS = (("quadratic_drag", "torque_gain"), ("touchdown_loss_along", "hip_viscous_friction"),
          ("effective_gravity", "actuation_delay"), ("liftoff_collision", "spring_cubic"))
 STRIDES = 50
-LOCATED = {"flight": ["flight_horizontal", "flight_vertical"], "touchdown": ["touchdown_along", "touchdown_across"],
+LOCATED = {"flight": ["flight_horizontal", "flight_vertical"],
+           "touchdown": ["touchdown_along", "touchdown_across", "touchdown_timing"],
            "stance_leg": ["stance_along", "stance_hip"], "stance_hip": ["stance_hip"], "actuator": ["stance_hip"],
            "liftoff": ["liftoff_along", "liftoff_across"], "sensor": []}
 

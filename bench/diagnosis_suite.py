@@ -49,11 +49,12 @@ LIBRARY_MATCH = {
     "sensor_offset_z": ("z_offset", lambda m: m), "sensor_offset_theta": ("theta_offset", lambda m: m),
 }
 # the plant's site -> the located / discovered sites that are right for it
-SITES = {"flight": {"flight_horizontal", "flight_vertical"}, "touchdown": {"touchdown_along", "touchdown_across"},
+SITES = {"flight": {"flight_horizontal", "flight_vertical"},
+         "touchdown": {"touchdown_along", "touchdown_across", "touchdown_timing"},
          "stance_along_leg": {"stance_along", "stance_hip"}, "stance_hip": {"stance_hip"},
          "actuator": {"stance_hip"}, "liftoff": {"liftoff_along", "liftoff_across"},
          "sensor_z": {"flight_vertical", "flight_horizontal", "stance_along", "stance_hip", "touchdown_along",
-                      "touchdown_across", "liftoff_along", "liftoff_across"}}
+                      "touchdown_across", "liftoff_along", "liftoff_across", "touchdown_timing"}}
 SITES["sensor_y"] = SITES["sensor_theta"] = SITES["sensor_z"]
 TOLERANCE = 0.2
 
@@ -135,6 +136,8 @@ def summarise(rows: list[dict]) -> dict:
             "locate_hit_rate_pct": 100.0 * sum(len(r["located"]) for r in rows) / max(effects, 1),
             "sensor_on_physics": sum(1 for r in rows if r["physics_only"] for f in r["false_positives"]
                                      if f in library.EFFECTS and library.get(f).kind == "sensor"),
+            "pair_hit_rate_pct": 100.0 * sum(len(r["hits"]) for r in rows if r["effects"] >= 2)
+            / max(sum(r["effects"] for r in rows if r["effects"] >= 2), 1),
             "clean_ok": all(not r["false_positives"] for r in rows if r["clean"]), "worse_after": worse,
             "recordings": len(rows), "effects": effects}
 

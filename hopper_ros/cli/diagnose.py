@@ -35,10 +35,12 @@ def _main(args: argparse.Namespace) -> int:
     except (DiagnosisError, RecordingError, ValueError, FileNotFoundError, KeyError) as exc:
         print(f"hopper diagnose: error: {exc}", file=sys.stderr)
         return 1 if isinstance(exc, ConfigError) else 2
-    from hopper_ros.diagnosis.core import location_line
+    from hopper_ros.diagnosis.core import location_line, timing_line
 
     print(f"{len(result['data'].strides)} strides, {result['wall_time']:.1f} s")
     print(location_line(result["location"], result["settings"].locate_threshold))
+    if timing_line(result["data"]):
+        print(timing_line(result["data"]))
     print(result["verdict"])
     b, a = result["before"], result["after"]
     print(f"held-out E_p {b['E_p']:.3f} -> {a['E_p']:.3f} %, E_v {b['E_v']:.3f} -> {a['E_v']:.3f} %, "

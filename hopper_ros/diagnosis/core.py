@@ -23,8 +23,9 @@ from hopper_ros.physics import laws
 from hopper_ros.physics.metrics import position_error_pct, time_error_pct, velocity_error_pct
 from hopper_ros.physics.params import ModelParams
 
-from .data import PHASES, StrideData, prepare
+from .data import LEAD_RESOLVED, PHASES, StrideData, prepare
 from .discover import Discovery, discover_site
+from .locate import SITES as LOCATE_SITES
 from .locate import Location, locate
 from .simulate import Variant, simulate_variants
 
@@ -40,6 +41,7 @@ class Settings:
     min_t: float = 3.0               # ... with a one-sided t of the per-stride log ratio
     apex_tolerance: float = 0.01     # a held-out E_p/E_v/E_t may not grow by more than this share
     apex_improvement: float = 0.03   # ... and their sum must fall by at least this share
+    sensor_alone: float = 0.5        # a sensor fault that leaves the next apex as it was must explain this share
     sensor_margin: float = 0.15      # a sensor effect must beat the best physics effect's reduction by this share
     discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
     tie_t: float = 2.5               # an effect fitting held-out strides not worse by this t is a look-alike ...
@@ -48,6 +50,8 @@ class Settings:
     screen: int = 8                  # candidates the screening passes on to the full search
     screen_strides: int = 24         # strides the screening uses
     liftoff_window: float = 0.003
+    exchange: int = 3                # runners-up tried as the partner of an exchanged effect
+    polish: int = 3                  # passes of the joint refit of an accepted effect with the earlier ones
 
 
 def load_settings(path="diagnosis.yaml") -> Settings:
@@ -91,14 +95,15 @@ class Candidate:
 
 
 LOCATED_SITES = {  # library site -> located sites where it shows first
-    "flight": ("flight_horizontal", "flight_vertical"), "touchdown": ("touchdown_along", "touchdown_across"),
+    "flight": ("flight_horizontal", "flight_vertical"),
+    "touchdown": ("touchdown_along", "touchdown_across", "touchdown_timing"),
     "stance_leg": ("stance_along",), "stance_hip": ("stance_hip",), "actuator": ("stance_hip",),
     "liftoff": ("liftoff_along", "liftoff_across"), "sensor": (),
 }
 
 
-def library_candidate(effect: library.Effect, base: laws.Coefficients) -> Candidate:
-    low, high = effect.search_bounds(base)
+def library_candidate(effect: library.Effect, base: laws.Coefficients, excited: dict | None = None) -> Candidate:
+    low, high = effect.data_bounds(base, excited or {})
     p = effect.primary
     if p.coefficient == "toe_mass":
         origin = float(base.mass) * (1.0 / float(base.collision_factor) - 1.0)
@@ -174,54 +179,148 @@ def _interp_pred(grid, pred_grid: dict, values: np.ndarray) -> dict:
     return out
 
 
-def rank_candidates(data: StrideData, current: Variant, candidates: list[Candidate], settings: Settings,
+@dataclass
+class Stack:
+    """The model a round searches on top of: the base variant and the effects accepted so far, whose
+    magnitudes are refitted with every new candidate (backfitting: a first effect fitted alone absorbs
+    part of a second one's signature)."""
+    base: Variant
+    effects: list
+
+    def variant(self, values=None) -> Variant:
+        v = self.base
+        for k, r in enumerate(self.effects):
+            v = r["candidate"].build(v, float(r["value"] if values is None else values[k]))
+        return v
+
+
+def _partner_points(r: dict) -> tuple[np.ndarray, int, float, float]:
+    """Three magnitudes of an accepted effect to refit it at (its value and one either side, inside its
+    bounds), the index of its value among them, and the range its refit may move over."""
+    c, v = r["candidate"], float(r["value"])
+    span = c.high - c.low
+    step = max(0.5 * abs(v - c.origin), 0.02 * span)
+    below, above = min(step, v - c.low), min(step, c.high - v)
+    if below <= 1e-9 * span:
+        xs, centre = np.array([v, v + above, v + 2 * above]), 0
+    elif above <= 1e-9 * span:
+        xs, centre = np.array([v - 2 * below, v - below, v]), 2
+    else:
+        xs, centre = np.array([v - below, v, v + above]), 1
+    width = xs[2] - xs[0]
+    return xs, centre, max(c.low, xs[0] - 0.5 * width), min(c.high, xs[2] + 0.5 * width)
+
+
+def _newton(xs: np.ndarray, ys: list, x):
+    """The quadratic through (xs[j], ys[j]) at x (arrays broadcast)."""
+    d1 = (ys[1] - ys[0]) / (xs[1] - xs[0])
+    d2 = ((ys[2] - ys[1]) / (xs[2] - xs[1]) - d1) / (xs[2] - xs[0])
+    return ys[0] + d1 * (x - xs[0]) + d2 * (x - xs[0]) * (x - xs[1])
+
+
+def _quadratic_min(xs: np.ndarray, ys: list, low: float, high: float) -> np.ndarray:
+    """Per column, where the quadratic through the three points is lowest within [low, high]."""
+    d1 = (ys[1] - ys[0]) / (xs[1] - xs[0])
+    d2 = ((ys[2] - ys[1]) / (xs[2] - xs[1]) - d1) / (xs[2] - xs[0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vertex = np.where(d2 > 0, (xs[0] + xs[1]) / 2 - d1 / np.where(d2 > 0, 2 * d2, 1.0), low)
+    tries = np.stack([np.clip(vertex, low, high), np.full_like(vertex, low), np.full_like(vertex, high),
+                      np.full_like(vertex, xs[0]), np.full_like(vertex, xs[1]), np.full_like(vertex, xs[2])])
+    values = _newton(xs, ys, tries)
+    return np.take_along_axis(tries, np.argmin(values, axis=0)[None], 0)[0]
+
+
+class _Backfit:
+    """A candidate's (partner point, grid value, stride) block: the partners refitted per grid value."""
+
+    def __init__(self, sse: np.ndarray, pred: dict, points: list):
+        self.sse, self.pred, self.points = sse, pred, points
+
+    def _ys(self, block: np.ndarray, i: int, columns) -> list:
+        xs, centre, _, _ = self.points[i]
+        others = iter((1 + 2 * i, 2 + 2 * i))
+        return [block[0][:, columns] if j == centre else block[next(others)][:, columns] for j in range(3)]
+
+    def partner_values(self, columns) -> list:
+        """Per partner, its magnitude at every grid value (on these strides' summed SSE): the one partner
+        whose refit gains most is refitted, the others stay (partners that look alike would otherwise
+        each take the whole correction); `_polish` repeats the fit from the new magnitudes."""
+        total = self.sse[:, :, columns].sum(axis=2)[:, :, None]
+        moves, gains = [], []
+        for i, p in enumerate(self.points):
+            ys = self._ys(total, i, [0])
+            x = _quadratic_min(p[0], ys, p[2], p[3])[:, 0]
+            moves.append(x)
+            gains.append(_newton(p[0], ys, x[:, None])[:, 0] - total[0, :, 0])
+        if len(moves) > 1:
+            best = np.argmin(np.array(gains), axis=0)
+            moves = [np.where(best == i, x, p[0][p[1]]) for i, (x, p) in enumerate(zip(moves, self.points))]
+        return moves
+
+    def at(self, block: np.ndarray, partner: list, columns) -> np.ndarray:
+        """(grid, strides) of `block` with the partners at `partner` (per grid value), additive in partners."""
+        out = block[0][:, columns].copy()
+        for i, x in enumerate(partner):
+            out += _newton(self.points[i][0], self._ys(block, i, columns), x[:, None]) - block[0][:, columns]
+        return out
+
+
+def rank_candidates(data: StrideData, stack: Stack, candidates: list[Candidate], settings: Settings,
                     base_sse: np.ndarray, base_errors: dict, grids: dict | None = None) -> list[dict]:
-    """Grid each candidate's magnitude on top of `current`, fit it per fold on the training strides, score it
-    on the held-out ones. Returns result dicts, best first."""
+    """Grid each candidate's magnitude on top of `stack` (its accepted effects refitted at each grid value),
+    fit it per fold on the training strides, score it on the held-out ones. Returns result dicts, best first."""
     if not candidates:
         return []
     grids = grids or {c.name: search_grid(c, settings.grid) for c in candidates}
-    variants = [c.build(current, float(v)) for c in candidates for v in grids[c.name]]
+    points = [_partner_points(r) for r in stack.effects]
+    partner_rows = [None]
+    for i, (xs, centre, _, _) in enumerate(points):
+        for j in range(3):
+            if j != centre:
+                values = [float(r["value"]) for r in stack.effects]
+                values[i] = float(xs[j])
+                partner_rows.append(values)
+    bases = [stack.variant(values) for values in partner_rows]
+    variants = [c.build(b, float(v)) for c in candidates for b in bases for v in grids[c.name]]
     sim = simulate_variants(data, variants)
     n = sim["sse"].shape[1]
     fold = _folds(n, settings.folds)
     results, row = [], 0
     for c in candidates:
         grid = grids[c.name]
-        sse = sim["sse"][row:row + len(grid)]
-        pred_grid = {k: v[row:row + len(grid)] for k, v in sim["pred"].items()}
-        row += len(grid)
-        floor = 0.5 * sse.min(axis=0)
-        held = np.empty(n)
-        held_values = np.empty(n)
-        fold_values = []
-
-        def fit(columns):
-            return _vertex(grid, sse[:, columns].sum(axis=1))
-
+        size = len(bases) * len(grid)
+        fit = _Backfit(sim["sse"][row:row + size].reshape(len(bases), len(grid), n),
+                       {k: v[row:row + size].reshape(len(bases), len(grid), n) for k, v in sim["pred"].items()},
+                       points)
+        row += size
+        everything = np.arange(n)
+        partner_all = fit.partner_values(everything)
+        profile_all = fit.at(fit.sse, partner_all, everything).sum(axis=1)
+        floor = 0.5 * fit.sse[0].min(axis=0)
+        held, held_values = np.empty(n), np.empty(n)
+        pred_held = {k: np.empty((len(grid), n)) for k in fit.pred}
+        fold_values, partner_folds = [], [[] for _ in points]
         for f in np.unique(fold):
-            train = fold != f
-            m = fit(train)
+            train, test = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+            partner = fit.partner_values(train)
+            m = _vertex(grid, fit.at(fit.sse, partner, train).sum(axis=1))
             fold_values.append(m)
-            held[~train] = np.maximum(_quadratic_at(grid, sse[:, ~train], m), floor[~train])
-            held_values[~train] = m
-        value = fit(np.ones(n, bool))
-        fit_total = float(_quadratic_at(grid, sse.sum(axis=1)[:, None], value)[0])
-        d = np.log(base_sse / held)
-        sd = d.std(ddof=1)
-        t_stat = float(d.mean() / (sd / math.sqrt(n))) if sd > 0 else 0.0
-        reduction = 1.0 - held.sum() / base_sse.sum()
-        n_eff = data.sample_count / data.corr_length
-        llr = 0.5 * n_eff * math.log(base_sse.sum() / held.sum())
-        errors = _errors(data, _interp_pred(grid, pred_grid, held_values))
-        results.append({"name": c.name, "candidate": c, "value": value, "fold_values": fold_values,
-                        "magnitude": c.physical(value), "reduction": float(reduction), "t": t_stat,
-                        "fit_reduction": float(1.0 - max(fit_total, 0.0) / base_sse.sum()),
-                        "delta_bic": float(-2 * llr + math.log(n_eff)), "held_sse": held, "errors": errors,
-                        "grid": grid})
-    for r in results:
-        r["total_reduction"] = float((base_sse.sum() - r["held_sse"].sum()) / data.model_sse)
-        _guards(r, base_errors, settings)
+            for i, x in enumerate(partner):
+                partner_folds[i].append(float(np.interp(m, grid, x)))
+            held[test] = np.maximum(_quadratic_at(grid, fit.at(fit.sse, partner, test), m), floor[test])
+            held_values[test] = m
+            for k, block in fit.pred.items():
+                pred_held[k][:, test] = fit.at(block, partner, test)
+        value = _vertex(grid, profile_all)
+        fit_total = float(_quadratic_at(grid, profile_all[:, None], value)[0])
+        errors = _errors(data, _interp_pred(grid, pred_held, held_values))
+        results.append(_score({"name": c.name, "candidate": c, "value": value, "fold_values": fold_values,
+                               "partner_values": [float(np.interp(value, grid, x)) for x in partner_all],
+                               "partner_fold_values": partner_folds, "magnitude": c.physical(value),
+                               "fit_reduction": float(1.0 - max(fit_total, 0.0) / base_sse.sum()),
+                               "grid_reduction": float(1.0 - profile_all.min() / base_sse.sum()),
+                               "held_sse": held, "errors": errors, "grid": grid},
+                              data, base_sse, base_errors, settings))
     results.sort(key=lambda r: -r["reduction"])
     return results
 
@@ -266,11 +365,18 @@ def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
     worse = [k for k in keys if not e[k] <= b[k] * (1 + settings.apex_tolerance) + 1e-6]
     if worse:
         why.append("held-out " + ", ".join(worse) + " worse")
-    if not sum(e[k] for k in keys) <= sum(b[k] for k in keys) * (1 - settings.apex_improvement):
+    # a sensor fault changes what is measured, not the motion: the next apex it predicts is the same (a delay)
+    # or moves with the measurement, so it must not be worse; physics must predict it better
+    # (then the fault must account for most of the model's residual: a small one fits what the physics left)
+    c = r["candidate"]
+    better = sum(e[k] for k in keys) <= sum(b[k] for k in keys) * (1 - settings.apex_improvement)
+    if c.kind != "sensor" and not better:
         why.append("the next apex is not predicted better")
+    elif c.kind == "sensor" and not better and r.get("total_reduction", 1.0) < settings.sensor_alone:
+        why.append(f"the next apex is not predicted better and it explains only {100 * r['total_reduction']:.0f} % "
+                   "of the model's residual")
     if e["fallen"] > b["fallen"]:
         why.append(f"{e['fallen'] - b['fallen']} more strides fall")
-    c = r["candidate"]
     if c.kind == "sensor" and not (c.plausible[0] <= abs(r["magnitude"] - c.off) <= c.plausible[1]):
         why.append(f"{r['magnitude']:.4g} {c.unit} is not a fault a real sensor has and this data resolves")
     r["rejected"] = why
@@ -321,7 +427,7 @@ def _paired_t(worse: np.ndarray, better: np.ndarray) -> float:
     return float(d.mean() / (sd / math.sqrt(len(d)))) if sd > 0 else (math.inf if d.mean() > 0 else 0.0)
 
 
-def _screen(data: StrideData, current: Variant, candidates: list[Candidate], settings: Settings,
+def _screen(data: StrideData, stack: Stack, candidates: list[Candidate], settings: Settings,
             located: set) -> list[Candidate]:
     """The candidates worth a full search: the best by trajectory reduction on a subset of strides
     (coarse grid), plus every candidate acting where locate sees a residual."""
@@ -330,17 +436,19 @@ def _screen(data: StrideData, current: Variant, candidates: list[Candidate], set
         return candidates
     index = np.linspace(0, n - 1, min(n, settings.screen_strides)).round().astype(int)
     sub = dataclasses.replace(data, strides=data.strides.subset(index))
-    first = simulate_variants(sub, [current])
+    first = simulate_variants(sub, [stack.variant()])
     errors = _errors(sub, {k: v[0] for k, v in first["pred"].items()})
-    ranked = rank_candidates(sub, current, candidates, dataclasses.replace(settings, grid=5), first["sse"][0], errors)
-    ranked.sort(key=lambda r: -r["fit_reduction"])
+    ranked = rank_candidates(sub, stack, candidates, dataclasses.replace(settings, grid=5), first["sse"][0], errors)
+    # the best grid point counts too: an SSE that is not parabolic in the magnitude (a torque limit) has a
+    # vertex far from its minimum on a coarse grid
+    ranked.sort(key=lambda r: -max(r["fit_reduction"], r["grid_reduction"]))
     keep = {r["name"] for r in ranked[:settings.screen]}
     keep |= {c.name for c in candidates if c.kind != "sensor" and set(LOCATED_SITES[c.site]) & located
              and any(r["name"] == c.name and r["reduction"] > 0 for r in ranked)}
     return [c for c in candidates if c.name in keep]
 
 
-def _refine(data, current, ranking, settings, base_sse, base_errors, exact: int = 12) -> list[dict]:
+def _refine(data, stack, ranking, settings, base_sse, base_errors, exact: int = 12) -> list[dict]:
     """Every candidate again on a fine grid between the neighbours of its best grid value (an SSE is not
     parabolic where an effect switches on, e.g. a torque limit), then the best scored from strides simulated
     at their fold magnitudes (no interpolation)."""
@@ -349,40 +457,46 @@ def _refine(data, current, ranking, settings, base_sse, base_errors, exact: int 
         grid, c = r["grid"], r["candidate"]
         k = int(np.argmin(np.abs(grid - r["value"])))
         grids[c.name] = np.linspace(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)], settings.grid)
-    refined = {r["name"]: r for r in rank_candidates(data, current, [r["candidate"] for r in ranking], settings,
+    refined = {r["name"]: r for r in rank_candidates(data, stack, [r["candidate"] for r in ranking], settings,
                                                        base_sse, base_errors, grids=grids)}
     ranking = [refined[r["name"]] if refined[r["name"]]["fit_reduction"] > r["fit_reduction"] else r
                for r in ranking]
     ranking.sort(key=lambda r: -r["fit_reduction"])
     best = ranking[:exact] + [r for r in ranking[exact:] if r["candidate"].kind == "discovered"]
-    _evaluate_exactly(data, current, best, settings, base_sse, base_errors)
+    _evaluate_exactly(data, stack, best, settings, base_sse, base_errors)
     ranking.sort(key=lambda r: -r["reduction"])
     return ranking
 
 
-def _evaluate_exactly(data, current, results, settings, base_sse, base_errors) -> None:
+def _evaluate_exactly(data, stack, results, settings, base_sse, base_errors) -> None:
     """Held-out scores of fitted candidates from strides simulated at their fold magnitudes (no interpolation)."""
     fold = _folds(len(data.strides), settings.folds)
     folds = list(np.unique(fold))
-    variants = [r["candidate"].build(current, float(v)) for r in results for v in r["fold_values"]]
+    variants = [r["candidate"].build(stack.variant([p[fi] for p in r["partner_fold_values"]]), float(v))
+                for r in results for fi, v in enumerate(r["fold_values"])]
     sim = simulate_variants(data, variants)
     idx = np.array([folds.index(f) for f in fold])
     cols = np.arange(len(fold))
-    n = len(fold)
     for k, r in enumerate(results):
         rows = k * len(folds) + idx
         held = sim["sse"][rows, cols]
         pred = {key: v[rows, cols] for key, v in sim["pred"].items()}
-        d = np.log(base_sse / held)
-        sd = d.std(ddof=1)
-        r["held_sse"] = held
-        r["total_reduction"] = float((base_sse.sum() - held.sum()) / data.model_sse)
-        r["t"] = float(d.mean() / (sd / math.sqrt(n))) if sd > 0 else 0.0
-        r["reduction"] = float(1.0 - held.sum() / base_sse.sum())
-        n_eff = data.sample_count / data.corr_length
-        r["delta_bic"] = float(-2 * 0.5 * n_eff * math.log(base_sse.sum() / held.sum()) + math.log(n_eff))
-        r["errors"] = _errors(data, pred)
-        _guards(r, base_errors, settings)
+        r["held_sse"], r["errors"] = held, _errors(data, pred)
+        _score(r, data, base_sse, base_errors, settings)
+
+
+def _score(r: dict, data, base_sse: np.ndarray, base_errors: dict, settings: Settings) -> dict:
+    """A result's statistics from its held-out SSE per stride against `base_sse`, then its guards."""
+    held = r["held_sse"]
+    d = np.log(base_sse / held)
+    sd = d.std(ddof=1)
+    n_eff = data.sample_count / data.corr_length
+    r["total_reduction"] = float((base_sse.sum() - held.sum()) / data.model_sse)
+    r["t"] = float(d.mean() / (sd / math.sqrt(len(d)))) if sd > 0 else 0.0
+    r["reduction"] = float(1.0 - held.sum() / base_sse.sum())
+    r["delta_bic"] = float(-2 * 0.5 * n_eff * math.log(base_sse.sum() / held.sum()) + math.log(n_eff))
+    _guards(r, base_errors, settings)
+    return r
 
 
 def _held_out_variants(data: StrideData, base: Variant, chosen: list[dict], fold: np.ndarray) -> dict:
@@ -399,6 +513,105 @@ def _held_out_variants(data: StrideData, base: Variant, chosen: list[dict], fold
     return {k: sim["pred"][k][idx, np.arange(len(fold))] for k in sim["pred"]}
 
 
+def _search(data, stack, candidates, settings, base_sse, base_errors) -> list[dict]:
+    return _refine(data, stack, rank_candidates(data, stack, candidates, settings, base_sse, base_errors),
+                   settings, base_sse, base_errors)
+
+
+def _polish(data, base, partners, result, settings, base_sse, base_errors) -> dict:
+    """The joint fit of `result` with its partners, repeated from the refitted magnitudes: each pass refits
+    the partners by a quadratic about their values, exact once the magnitudes stop moving."""
+    for _ in range(settings.polish if partners else 0):
+        _adopt(partners, result)
+        step = np.diff(result["grid"]).max()
+        grid = {result["name"]: np.linspace(result["value"] - step, result["value"] + step, settings.grid)}
+        again = rank_candidates(data, Stack(base, partners), [result["candidate"]], settings, base_sse,
+                                base_errors, grids=grid)
+        _evaluate_exactly(data, Stack(base, partners), again, settings, base_sse, base_errors)
+        moved = [abs(a - b) for a, b in zip(again[0]["partner_values"], [r["value"] for r in partners])]
+        if again[0]["reduction"] < result["reduction"]:
+            break
+        result.update(again[0])
+        if all(m <= 1e-3 * (r["candidate"].high - r["candidate"].low) for m, r in zip(moved, partners)):
+            break
+    _adopt(partners, result)
+    return result
+
+
+def _adopt(chosen: list[dict], result: dict) -> None:
+    """The accepted effects take the magnitudes they were refitted to beside `result`."""
+    for r, value, folds in zip(chosen, result["partner_values"], result["partner_fold_values"]):
+        r["value"], r["fold_values"], r["magnitude"] = value, list(folds), r["candidate"].physical(value)
+
+
+def _revisit(data, base, chosen, settings, current_sse, current_errors):
+    """Each earlier effect tried again beside the later ones, against its round's runners-up: one that
+    stood in for a pair (a lower gain for a gain and drag) is replaced, one no longer needed is dropped."""
+    i = 0
+    while i < len(chosen) - 1 and len(chosen) > 1:
+        old = chosen[i]
+        others = chosen[:i] + chosen[i + 1:]
+        stack = Stack(base, others)
+        sim = simulate_variants(data, [stack.variant()])
+        sse, errors = sim["sse"][0], _errors(data, {k: v[0] for k, v in sim["pred"].items()})
+        taken = {r["name"] for r in others}
+        pool = [old["candidate"]] + [c for c in old.get("alternatives", []) if c.name not in taken]
+        ranking = _search(data, stack, pool, settings, sse, errors)
+        best, ties = _choose(ranking, settings)
+        if best is None:
+            chosen.pop(i)
+            current_sse, current_errors = sse, errors
+            continue
+        if best["name"] != old["name"] and _paired_t(next(r["held_sse"] for r in ranking if r["name"] == old["name"]),
+                                                     best["held_sse"]) < settings.tie_t:
+            best = next(r for r in ranking if r["name"] == old["name"])   # not clearly better: keep the first
+        best["ties"] = ties if best["name"] != old["name"] else old.get("ties", [])
+        best["location"] = old.get("location", [])
+        best["alternatives"] = [c for c in pool if c.name != best["name"]]
+        _polish(data, base, others, best, settings, sse, errors)
+        chosen[i] = best
+        current_sse, current_errors = best["held_sse"], best["errors"]
+        i += 1
+    return current_sse, current_errors
+
+
+def _exchange(data, base, chosen, ranking, settings, current_sse, current_errors):
+    """When no effect passes on top of the accepted ones, an accepted one may be standing in for a pair
+    (it fitted both alone): each strong runner-up is added, the earlier effects revisited beside it (and
+    swapped for their rounds' runners-up), and the set kept if every effect in it then passes its guards
+    against the model without it. Returns (effects, held-out SSE, errors) or None."""
+    strong = [r for r in ranking if r["reduction"] >= settings.min_reduction and r["t"] >= settings.min_t]
+    for r in strong[:settings.exchange]:
+        trial = [dict(e) for e in chosen]
+        added = dict(r)
+        _polish(data, base, trial, added, settings, current_sse, current_errors)
+        trial.append(added)
+        sse, errors = _revisit(data, base, trial, settings, added["held_sse"], added["errors"])
+        if [e["name"] for e in trial[:-1]] == [e["name"] for e in chosen] or len(trial) <= len(chosen):
+            continue                      # nothing was exchanged: the runner-up failed on its own already
+        others = trial[:-1]
+        sim = simulate_variants(data, [Stack(base, others).variant()])
+        last = _search(data, Stack(base, others), [trial[-1]["candidate"]], settings, sim["sse"][0],
+                       _errors(data, {k: v[0] for k, v in sim["pred"].items()}))[0]
+        if not last["significant"]:
+            continue
+        _polish(data, base, others, last, settings, sim["sse"][0], errors)
+        against = _score({"held_sse": last["held_sse"], "errors": last["errors"], "candidate": last["candidate"],
+                          "magnitude": last["magnitude"]}, data, current_sse, current_errors, settings)
+        if not against["significant"]:
+            continue                      # the exchanged set must beat the accepted one as an added effect would
+        last.update({k: trial[-1][k] for k in ("location", "alternatives") if k in trial[-1]})
+        last["ties"] = []
+        return others + [last], last["held_sse"], last["errors"]
+    return None
+
+
+def _cumulative_errors(data, base, chosen, fold) -> None:
+    """Held-out E_p/E_v/E_t after each accepted effect and those before it, at their final magnitudes."""
+    for k in range(1, len(chosen) + 1):
+        chosen[k - 1]["errors"] = _errors(data, _held_out_variants(data, base, chosen[:k], fold))
+
+
 def base_variant(params: ModelParams, model_effects: dict | None = None) -> Variant:
     coefficients, sensors = library.apply(laws.Coefficients.from_model(params), model_effects or {})
     return Variant(coefficients, sensors)
@@ -411,36 +624,47 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     data.corr_length = max(1.0, float(np.median([correlation_length(r["z"][0]) for r in base_sim["series"]])))
     data.model_sse = float(base_sim["sse"][0].sum())
     fold = _folds(len(data.strides), settings.folds)
-    current, current_sse = base, base_sim["sse"][0]
+    current_sse = base_sim["sse"][0]
     base_errors = current_errors = _errors(data, {k: v[0] for k, v in base_sim["pred"].items()})
     chosen, rounds, discoveries = [], [], []
     first_location = None
+    excited = {"command": float(np.max(np.abs(data.strides.tau_0), initial=0.0))}
     for round_index in range(settings.max_effects):
+        stack = Stack(base, list(chosen))
+        current = stack.variant()
         locations, sets = locate(data, current)
         if first_location is None:
             first_location = locations
         located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
         taken = {r["name"] for r in chosen}
-        cands = [library_candidate(e, current.coefficients) for e in library.LIBRARY + library.SENSORS
+        cands = [library_candidate(e, current.coefficients, excited) for e in library.LIBRARY + library.SENSORS
                  if e.name not in taken]
-        cands = _screen(data, current, cands, settings, located)
-        for site in sorted(located):
+        cands = _screen(data, stack, cands, settings, located)
+        for site in sorted(located & set(LOCATE_SITES)):     # (touchdown timing has no residual samples)
             found = discover_site(site, sets)
             if found is not None and f"discovered_{site}" not in taken:
                 discoveries.append(found)
                 cands.append(discovered_candidate(found))
-        ranking = rank_candidates(data, current, cands, settings, current_sse, current_errors)
-        ranking = _refine(data, current, ranking, settings, current_sse, current_errors)
+        ranking = _search(data, stack, cands, settings, current_sse, current_errors)
         top, ties = _choose(ranking, settings)
         rounds.append(ranking)
+        if top is None and chosen:
+            trial = _exchange(data, base, chosen, ranking, settings, current_sse, current_errors)
+            if trial is not None:
+                chosen, current_sse, current_errors = trial
+                continue
         if top is None:
             break
         top["ties"] = ties
         top["location"] = [loc for loc in locations if loc.ratio >= settings.locate_threshold]
+        top["alternatives"] = [r["candidate"] for r in ranking[:settings.screen] if r is not top]
+        _polish(data, base, chosen, top, settings, current_sse, current_errors)
         chosen.append(top)
-        current = top["candidate"].build(current, top["value"])
-        current_sse = top["held_sse"]
-        current_errors = top["errors"]
+        current_sse, current_errors = top["held_sse"], top["errors"]
+        if len(chosen) > 1:
+            current_sse, current_errors = _revisit(data, base, chosen, settings, current_sse, current_errors)
+    current = Stack(base, chosen).variant()
+    _cumulative_errors(data, base, chosen, fold)
     final_sim = simulate_variants(data, [base, current], keep_series=True)
     before = base_errors
     after = _errors(data, _held_out_variants(data, base, chosen, fold)) if chosen else before
@@ -483,6 +707,18 @@ def verdict(chosen: list[dict], left: list[Location] | None = None, threshold: f
             text += " (or " + " or ".join(t["name"] for t in r["ties"]) + ": not separable on this data)"
         parts.append(text)
     return "missing: " + ", ".join(parts) + tail
+
+
+def timing_line(data: StrideData) -> str:
+    """Where stance begins against the model's geometry (the held leg starts to turn before the model's leg,
+    at its rest length, would reach the ground): empty when they agree."""
+    lead = data.touchdown_lead
+    if abs(lead) <= LEAD_RESOLVED:
+        return ""
+    when = "before" if lead > 0 else "after"
+    return (f"events: stance begins {abs(lead) * 1e3:.1f} ms {when} the model's leg reaches the ground (median "
+            "over strides): the running surface or the leg's length is not where the model has it, or the height "
+            "channel lags")
 
 
 def location_line(locations: list[Location], threshold: float) -> str:

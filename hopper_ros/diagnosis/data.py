@@ -3,16 +3,17 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from hopper_ros.identification.recordings import Recording
-from hopper_ros.identification.strides import extract_strides
+from hopper_ros.identification.strides import ExtractionSettings, extract_strides
 from hopper_ros.physics.exact import Phase
 from hopper_ros.physics.params import ModelParams
 
 PHASES = ("descent", "compression", "decompression", "liftoff", "ascent")
+LEAD_RESOLVED = 1e-3   # [s] a median stance start this far from the model's touchdown is not timing noise
 
 
 class DiagnosisError(ValueError):
@@ -52,6 +53,47 @@ def noise_level(x: np.ndarray, mask: np.ndarray) -> float:
     return max(1.4826 * float(np.median(np.abs(d3 - np.median(d3)))) / math.sqrt(20.0), floor, 1e-7)
 
 
+def held_touchdown_angles(rec: Recording, strides, sigma_theta: float, hold: int = 10, search: int = 40):
+    """theta_td per stride as the angle the leg was held at when stance began, and how long before the
+    model's touchdown (the toe at the model's rest length) that hold ended [s].
+
+    The leg is held at the touchdown angle in late flight; in stance it turns with the body at several
+    rad/s. The hold ends at the last sample (searched back from just after the model's touchdown) that
+    stays within 4 noise levels of the median of the `hold` samples before it. The recorded angle just
+    before the model's touchdown is already in stance when the ground is higher, or the leg longer, than
+    the model has it; the held angle is not."""
+    t, theta = rec.t, rec.theta
+    angles, lead = strides.touchdown_angle.copy(), np.zeros(len(strides))
+    limit = 4.0 * sigma_theta
+    for i, td in enumerate(strides.touchdown_time):
+        a = int(np.searchsorted(t, td))
+        lowest = max(hold + 1, a - search)
+        for j in range(min(a + 3, len(t) - 1), lowest, -1):
+            ref = float(np.median(theta[j - hold:j]))
+            if abs(theta[j] - ref) < limit and abs(theta[j - 1] - ref) < limit:
+                angles[i] = float(np.median(theta[j - hold:j + 1]))
+                after = slice(j + 1, min(j + 5, len(t)))
+                start = t[j]
+                if after.stop - after.start >= 2:    # where the stance's turning leaves the held angle
+                    slope, level = np.polyfit(t[after] - t[j], theta[after], 1)
+                    if abs(slope) > 0:
+                        start = t[j] + float(np.clip((angles[i] - level) / slope, 0.0, t[j + 1] - t[j]))
+                lead[i] = td - start
+                break
+    return angles, lead
+
+
+def _ramp_from_stance_start(strides, lead: float) -> None:
+    """The (2.32) ramps read from the logged torque were timed from the model's touchdown; the drive
+    started them when stance began, `lead` seconds earlier: the same line, t_f longer by `lead` and
+    tau_0 the ramp's value at its real start. Constant torques (t_f at its cap) are unchanged."""
+    ramp = strides.ramp_duration
+    timed = (strides.tau_0 != 0) & (ramp > 0) & (ramp < ExtractionSettings().max_ramp_duration)
+    new_ramp = np.where(timed, ramp + lead, ramp)
+    strides.tau_0 = np.where(timed, strides.tau_0 * new_ramp / np.where(timed, ramp, 1.0), strides.tau_0)
+    strides.ramp_duration = new_ramp
+
+
 @dataclass
 class StrideData:
     rec: Recording
@@ -64,6 +106,8 @@ class StrideData:
     sample_count: int = 0
     corr_length: float = 1.0
     model_sse: float = 1.0       # the model's own trajectory SSE (before any effect)
+    touchdown_lead: float = 0.0  # [s] median: stance began this long before the model's leg met the ground
+    stance_start: np.ndarray = field(default_factory=lambda: np.zeros(0))   # [s] per stride: the held leg turns
 
 
 def prepare(rec: Recording, params: ModelParams, min_strides: int, liftoff_window: float) -> StrideData:
@@ -92,8 +136,14 @@ def prepare(rec: Recording, params: ModelParams, min_strides: int, liftoff_windo
     for v in sigma:
         if not np.isfinite(sigma[v]):
             sigma[v] = 1e-4
+    strides.touchdown_angle, touchdown_lead = held_touchdown_angles(rec, strides, sigma["theta"])
     q = {v: quantum(getattr(rec, v)) for v in ("y", "z", "theta")}
     duration = float(np.max(rec.t[strides.stop - 1] - strides.apex_time)) + 0.01
     data = StrideData(rec, strides, params, sigma, q, phase, duration)
     data.sample_count = int(sum(int(b - a) for a, b in zip(strides.start, strides.stop)))
+    data.stance_start = strides.touchdown_time - touchdown_lead
+    data.touchdown_lead = float(np.median(touchdown_lead))
+    # only an early start is re-timed: a late one is as often the angle channel lagging as the ground lower
+    if not rec.commands and data.touchdown_lead > LEAD_RESOLVED:
+        _ramp_from_stance_start(strides, data.touchdown_lead)
     return data

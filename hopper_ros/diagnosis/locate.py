@@ -14,6 +14,7 @@ noise produces.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +22,7 @@ from scipy.signal import savgol_filter
 
 from hopper_ros.physics import lanes, laws
 
-from .data import StrideData
+from .data import LEAD_RESOLVED, StrideData
 from .simulate import Variant
 
 FLIGHT_WINDOW = 71     # samples of the Savitzky-Golay fit in flight
@@ -35,7 +36,8 @@ SITES = ("flight_horizontal", "flight_vertical", "stance_along", "stance_hip", "
 SITE_WORDS = {"flight_horizontal": ("flight", "horizontal"), "flight_vertical": ("flight", "vertical"),
               "stance_along": ("stance", "along the leg"), "stance_hip": ("stance", "about the hip"),
               "touchdown_along": ("touchdown", "along the leg"), "touchdown_across": ("touchdown", "across the leg"),
-              "liftoff_along": ("lift-off", "along the leg"), "liftoff_across": ("lift-off", "across the leg")}
+              "liftoff_along": ("lift-off", "along the leg"), "liftoff_across": ("lift-off", "across the leg"),
+              "touchdown_timing": ("touchdown", "in time")}
 BINS = {"flight_horizontal": ("descent", "ascent"), "flight_vertical": ("descent", "ascent"),
         "stance_along": ("early stance", "mid stance", "late stance"),
         "stance_hip": ("early stance", "mid stance", "late stance"),
@@ -302,5 +304,35 @@ def locate(data: StrideData, variant: Variant) -> tuple[list[Location], tuple]:
         ratio = max(rms / max(noise_rms, 1e-12), t_bias)
         found.append(Location(site, ratio, BINS[site][k] if k < len(BINS[site]) else "", float(means[k]),
                               UNITS[site], int(ok.any(axis=1).sum())))
+    timing = timing_location(data, variant)
+    if timing is not None:
+        found.append(timing)
     found.sort(key=lambda loc: -loc.ratio)
     return found, sets
+
+
+def timing_location(data: StrideData, variant: Variant) -> Location | None:
+    """Touchdown in time: stance begins (the held leg starts to turn, `data.held_touchdown_angles`) away from
+    where the variant's leg at rest length meets its ground in the recorded height and angle (its sensor
+    faults undone); size over noise as the median's t / 3."""
+    rec, c, sensors = data.rec, variant.coefficients, variant.sensors
+    height = (rec.z - sensors["z_offset"]) / sensors["z_scale"]
+    leads = []
+    for td, start, angle in zip(data.strides.touchdown_time, data.stance_start, data.strides.touchdown_angle):
+        a = int(np.searchsorted(rec.t, td))
+        k = np.arange(max(a - 40, 1), min(a + 10, len(rec.t)))
+        held = (angle - sensors["theta_offset"]) / sensors["theta_scale"]
+        toe = height[k] - float(c.rest_length) * math.cos(held) - float(c.ground_height)
+        below = np.flatnonzero((toe[1:] <= 0.0) & (toe[:-1] > 0.0))
+        if below.size:
+            j = below[0]
+            touchdown = rec.t[k[j]] + (rec.t[k[j + 1]] - rec.t[k[j]]) * toe[j] / (toe[j] - toe[j + 1])
+            leads.append(touchdown - sensors["z_delay"] - (start - sensors["theta_delay"]))
+    leads = np.array(leads)
+    if leads.size < 5:
+        return None
+    median = float(np.median(leads))
+    spread = 1.4826 * float(np.median(np.abs(leads - median))) / math.sqrt(leads.size)
+    ratio = abs(median) / max(spread, 1e-5) / 3.0 if abs(median) > LEAD_RESOLVED else 0.0
+    window = "stance begins early" if median > 0 else "stance begins late"
+    return Location("touchdown_timing", ratio, window, median * 1e3, "ms", int(leads.size))

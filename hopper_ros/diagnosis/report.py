@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .core import location_line
+from .core import location_line, timing_line
 from .data import PHASES
 
 
@@ -80,6 +80,7 @@ def write_json(result: dict, path: Path) -> Path:
            "verdict": entries, "summary": result["verdict"],
            "location": _location_entries(result["location"], threshold),
            "held_out": {"before": result["before"], "after": result["after"]},
+           "stance_begins_before_model_touchdown_s": result["data"].touchdown_lead,
            "model_effects": result.get("model_effects", {})}
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(_finite(doc), indent=2, allow_nan=False), encoding="utf-8")
@@ -121,7 +122,7 @@ def write_report(result: dict, out: Path) -> Path:
              f"samples: y {data.sigma['y'] * 1e3:.3f} mm, z {data.sigma['z'] * 1e3:.3f} mm, "
              f"theta {data.sigma['theta'] * 1e3:.3f} mrad.", "",
              "## 1. Where the model and the recording differ", "",
-             location_line(result["location"], threshold), "",
+             location_line(result["location"], threshold), "", timing_line(data), "",
              "Residual forces at the measured state (recording minus model, the smoothing's bias removed with a "
              "clean twin of the recording made by the model), against what noise alone produces (a noisy twin):", "",
              "| phase | direction | window | size | over noise |", "|---|---|---|---|---|"]

@@ -28,6 +28,9 @@ class Parameter:
     relative: bool = False  # bounds are factors of the model's own coefficient
     inverse: bool = False   # searched as 1/value (a limit or a stiffness whose "off" is infinity)
     plausible: tuple = (0.0, math.inf)   # |value - off| a real sensor could have and the data resolve (sensor guard)
+    # (quantity, low, high): where a recording resolves it, as factors of a quantity the recording excites
+    # (a torque limit only shows between the smallest and largest commanded torques); see `data_bounds`
+    resolved: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,20 @@ class Effect:
             value = float(getattr(base, p.coefficient))
             return p.low * value, p.high * value
         return p.low, p.high
+
+    def data_bounds(self, base, excited: dict) -> tuple[float, float]:
+        """`search_bounds` narrowed to what a recording exciting `excited` (e.g. {"command": 9.5}, the largest
+        commanded torque [N m]) can resolve."""
+        low, high = self.search_bounds(base)
+        p = self.primary
+        if not p.resolved or p.resolved[0] not in excited:
+            return low, high
+        quantity, lo, hi = p.resolved
+        scale = float(excited[quantity])
+        if not scale > 0:
+            return low, high
+        values = sorted(self.search_value(f * scale) for f in (lo, hi))
+        return max(low, values[0]), min(high, values[1])
 
     def coefficients(self, value: float, base=None) -> dict:
         """The coefficients this entry sets for a primary value in search units (`inverse`: 1/value)."""
@@ -175,7 +192,7 @@ LIBRARY: tuple[Effect, ...] = (
        "T_l tau' + tau = tau_cmd", "the torque follows the command through a first-order lag (current loop, "
        "transmission)", TORQUES),
     _e("torque_saturation", "actuator", "actuator", "hip",
-       Parameter("tau_max", "N m", 0.0, 0.6, "torque_limit", inverse=True),
+       Parameter("tau_max", "N m", 0.0, 0.6, "torque_limit", inverse=True, resolved=("command", 0.3, 1.0)),
        "|tau| <= tau_max", "the hip torque is clipped", TORQUES),
     _e("hip_viscous_friction", "actuator", "stance_hip", "hip",
        Parameter("b", "N m s/rad", 0.0, 0.3, "hip_viscous"),
