@@ -591,16 +591,16 @@ def _exchange(data, base, chosen, ranking, settings, current_sse, current_errors
         added = dict(r)
         _polish(data, base, trial, added, settings, current_sse, current_errors)
         trial.append(added)
-        sse, errors = _revisit(data, base, trial, settings, added["held_sse"], added["errors"])
+        _revisit(data, base, trial, settings, added["held_sse"], added["errors"])
         if [e["name"] for e in trial[:-1]] == [e["name"] for e in chosen] or len(trial) <= len(chosen):
             continue                      # nothing was exchanged: the runner-up failed on its own already
         others = trial[:-1]
         sim = simulate_variants(data, [Stack(base, others).variant()])
-        last = _search(data, Stack(base, others), [trial[-1]["candidate"]], settings, sim["sse"][0],
-                       _errors(data, {k: v[0] for k, v in sim["pred"].items()}))[0]
+        without = _errors(data, {k: v[0] for k, v in sim["pred"].items()})
+        last = _search(data, Stack(base, others), [trial[-1]["candidate"]], settings, sim["sse"][0], without)[0]
         if not last["significant"]:
             continue
-        _polish(data, base, others, last, settings, sim["sse"][0], errors)
+        _polish(data, base, others, last, settings, sim["sse"][0], without)
         against = _score({"held_sse": last["held_sse"], "errors": last["errors"], "candidate": last["candidate"],
                           "magnitude": last["magnitude"]}, data, current_sse, current_errors, settings)
         if not against["significant"]:
