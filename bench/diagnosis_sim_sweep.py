@@ -4,7 +4,7 @@
 on, saved as a CSV without phase labels, diagnosed, scored by `diagnosis_suite.score`: named with the
 magnitude within 20 %, located at the site where it acts, nothing else named. Physics effects are
 switched on in the simulated robot (config/sim.yaml's magnitudes); a sensor fault is applied to the
-recorded channel (delay by interpolation, scale, offset). Used by test_diagnosis.py (a subset) and
+recorded channel (delay by interpolation within each experiment, scale, offset). Used by test_diagnosis.py (a subset) and
 bench_diagnosis.py (the whole sweep).
 """
 
@@ -51,6 +51,18 @@ def cases() -> dict:
     return out
 
 
+def delayed(rec, x, delay: float):
+    """Channel `x` as a sensor `delay` late would show it, within each experiment (the gap between two
+    experiments is no signal to interpolate across): its first samples extend the throw's motion back."""
+    out = np.empty_like(x)
+    for seg in rec.segments():
+        t, v = rec.t[seg], x[seg]
+        slope = np.polyfit(t[:10] - t[0], v[:10], 1)[0]
+        late = t - delay
+        out[seg] = np.where(late < t[0], v[0] + slope * (late - t[0]), np.interp(late, t, v))
+    return out
+
+
 def make_recording(names: list[str], folder: Path, seed: int):
     cfg = load_sim_config().with_sensors(**{n: True for n in SENSORS})
     physics = [n for n in names if library.get(n).kind == "physics"]
@@ -68,7 +80,7 @@ def make_recording(names: list[str], folder: Path, seed: int):
             channel, op = n.split("_")
             x = getattr(rec, channel)
             if op == "delay":
-                x = np.interp(rec.t - value, rec.t, x)
+                x = delayed(rec, x, value)
             elif op == "scale":
                 x = x * value
             else:

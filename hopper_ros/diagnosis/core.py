@@ -26,7 +26,7 @@ from hopper_ros.physics.params import ModelParams
 from .data import LEAD_RESOLVED, PHASES, StrideData, prepare
 from .discover import Discovery, discover_site
 from .locate import SITES as LOCATE_SITES
-from .locate import Location, locate
+from .locate import Location, fit_locations, locate
 from .simulate import Variant, simulate_variants
 
 
@@ -100,6 +100,25 @@ LOCATED_SITES = {  # library site -> located sites where it shows first
     "stance_leg": ("stance_along",), "stance_hip": ("stance_hip",), "actuator": ("stance_hip",),
     "liftoff": ("liftoff_along", "liftoff_across"), "sensor": (),
 }
+
+
+DIRECTED_SITES = {  # (library site, direction) -> the located sites where that change acts
+    ("flight", "horizontal"): ("flight_horizontal",), ("flight", "vertical"): ("flight_vertical",),
+    ("flight", "both"): ("flight_horizontal", "flight_vertical"),
+    ("touchdown", "along"): ("touchdown_along",), ("touchdown", "across"): ("touchdown_across",),
+    ("touchdown", "vertical"): ("touchdown_timing",),
+    ("stance_leg", "along"): ("stance_along",), ("stance_leg", "horizontal"): ("stance_along", "stance_hip"),
+    ("liftoff", "both"): ("liftoff_along", "liftoff_across"),
+}
+
+
+def candidate_sites(c: Candidate) -> tuple:
+    """The located sites where a candidate's change acts: a discovered term set at its own site, a library
+    effect by its site and direction."""
+    if c.kind == "discovered":
+        return (c.site,)
+    effect = library.get(c.name)
+    return DIRECTED_SITES.get((effect.site, effect.direction), LOCATED_SITES[effect.site])
 
 
 def library_candidate(effect: library.Effect, base: laws.Coefficients, excited: dict | None = None) -> Candidate:
@@ -425,6 +444,16 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     return top, ties
 
 
+def _explaining(ranking: list[dict], settings: Settings) -> list[dict]:
+    """The changes of the model (physics or discovered) that pass every guard: the best by held-out reduction and
+    those not worse than it on held-out strides (paired t below `tie_t`)."""
+    passed = [r for r in ranking if r["candidate"].kind != "sensor" and not r["rejected"]]
+    if not passed:
+        return []
+    top = max(passed, key=lambda r: r["reduction"])
+    return [r for r in passed if r is top or _paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t]
+
+
 def _paired_t(worse: np.ndarray, better: np.ndarray) -> float:
     """One-sided t over strides that `worse` fits held-out strides worse than `better`."""
     d = np.log(worse / better)
@@ -567,10 +596,11 @@ def _revisit(data, base, chosen, settings, current_sse, current_errors):
             chosen.pop(i)
             current_sse, current_errors = sse, errors
             continue
-        if best["name"] != old["name"] and _paired_t(next(r["held_sse"] for r in ranking if r["name"] == old["name"]),
-                                                     best["held_sse"]) < settings.tie_t:
-            best = next(r for r in ranking if r["name"] == old["name"])   # not clearly better: keep the first
-        best["ties"] = ties if best["name"] != old["name"] else old.get("ties", [])
+        again = next(r for r in ranking if r["name"] == old["name"])
+        if best is not again and again["significant"] and _paired_t(again["held_sse"], best["held_sse"]) < settings.tie_t:
+            ties = [best] + [r for r in ties if r is not again]
+            best = again                  # not clearly better: keep the first
+        best["ties"] = ties               # the look-alikes beside the later effects, where they are told apart best
         best["location"] = old.get("location", [])
         best["alternatives"] = [c for c in pool if c.name != best["name"]]
         _polish(data, base, others, best, settings, sse, errors)
@@ -651,6 +681,10 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
                 discoveries.append(found)
                 cands.append(discovered_candidate(found))
         ranking = _search(data, stack, cands, settings, current_sse, current_errors)
+        if round_index == 0:
+            first_location = sorted(first_location + fit_locations(_explaining(ranking, settings), candidate_sites,
+                                                                   settings.locate_threshold, settings.min_t),
+                                    key=lambda loc: -loc.ratio)
         top, ties = _choose(ranking, settings)
         rounds.append(ranking)
         if top is None and chosen:

@@ -63,7 +63,8 @@ def verdict_entries(result: dict) -> list[dict]:
 
 def _location_entries(locations, threshold):
     return [{"phase": loc.phase, "direction": loc.direction, "site": loc.site, "window": loc.window,
-             "size": loc.size, "unit": loc.unit, "over_noise": loc.ratio, "above_noise": loc.ratio >= threshold}
+             "size": loc.size, "unit": loc.unit, "over_noise": loc.ratio, "above_noise": loc.ratio >= threshold,
+             "basis": loc.basis}
             for loc in locations]
 
 
@@ -123,11 +124,14 @@ def write_report(result: dict, out: Path) -> Path:
              f"theta {data.sigma['theta'] * 1e3:.3f} mrad.", "",
              "## 1. Where the model and the recording differ", "",
              location_line(result["location"], threshold), "", timing_line(data), "",
-             "Residual forces at the measured state (recording minus model, the smoothing's bias removed with a "
-             "clean twin of the recording made by the model), against what noise alone produces (a noisy twin):", "",
-             "| phase | direction | window | size | over noise |", "|---|---|---|---|---|"]
+             "By force: residual forces at the measured state (recording minus model, the smoothing's bias removed "
+             "with a clean twin of the recording made by the model), against what noise alone produces (a noisy "
+             "twin). By fit: the change acting at the site that, fitted on training strides, removes most of the "
+             "held-out residual (its t over strides, scaled so that the guard's t is the threshold):", "",
+             "| phase | direction | basis | window | size | over noise |", "|---|---|---|---|---|---|"]
     for loc in result["location"]:
-        lines.append(f"| {loc.phase} | {loc.direction} | {loc.window} | {loc.size:+.3g} {loc.unit} | {loc.ratio:.1f} |")
+        lines.append(f"| {loc.phase} | {loc.direction} | {loc.basis} | {loc.window} | {loc.size:+.3g} {loc.unit} "
+                     f"| {loc.ratio:.1f} |")
     lines += ["", "## 2. Candidates (held-out ranking)", ""]
     for k, ranking in enumerate(result["rounds"]):
         lines += [f"Round {k + 1}" + (" (on top of the effects accepted before)" if k else "") + ":", "",

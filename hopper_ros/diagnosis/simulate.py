@@ -75,6 +75,9 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
             arr = getattr(res, ch)[li]
             val = np.take_along_axis(arr, j0, 1) * (1 - w) + np.take_along_axis(arr, j0 + 1, 1) * w
             if ch == "y":   # the measured apex y is where the lane starts; a delayed z moves that start
+                # (a y channel later than z reads samples from before the lane's start: the apex speed carries on)
+                speed = s.forward_speed[i] / sens["y_scale"][li, None]
+                val = val + speed * np.minimum(lane_t, 0.0)
                 val = val - (sens["z_delay"][li, None] - sens["y_delay"][li, None]) * s.forward_speed[i]
                 val = val * sens["y_scale"][li, None]
             else:
