@@ -709,6 +709,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     final_sim = simulate_variants(data, [base, current], keep_series=True)
     before = base_errors
     after = _errors(data, _held_out_variants(data, base, chosen, fold)) if chosen else before
+    first_location = _with_chosen_sites(first_location, chosen, settings)
     residual_location = locate(data, current)[0] if chosen else first_location
     return {"data": data, "rounds": rounds, "chosen": chosen, "before_phase": _rms_table(final_sim, 0, data),
             "after_phase": _rms_table(final_sim, 1, data), "before": before, "after": after,
@@ -716,6 +717,17 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
             "residual_location": residual_location, "discoveries": discoveries,
             "verdict": verdict(chosen, residual_location if chosen else first_location, settings.locate_threshold),
             "settings": settings, "model_effects": dict(model_effects or {})}
+
+
+def _with_chosen_sites(locations: list[Location], chosen: list[dict], settings: Settings) -> list[Location]:
+    """Each accepted effect located by its own fit (its held-out gain over the model without it, the others kept)
+    where nothing stronger stands at its site: the second effect of a pair is judged beside the first."""
+    strongest = {}
+    for loc in locations:
+        strongest[loc.site] = max(strongest.get(loc.site, -math.inf), loc.ratio)
+    added = [loc for loc in fit_locations(chosen, candidate_sites, settings.locate_threshold, settings.min_t)
+             if loc.ratio > strongest.get(loc.site, -math.inf)]
+    return sorted(locations + added, key=lambda loc: -loc.ratio)
 
 
 def _rms_table(sim: dict, row: int, data: StrideData) -> dict:
