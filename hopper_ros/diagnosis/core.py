@@ -52,6 +52,7 @@ class Settings:
     liftoff_window: float = 0.003
     exchange: int = 3                # runners-up tried as the partner of an exchanged effect
     polish: int = 3                  # passes of the joint refit of an accepted effect with the earlier ones
+    secondary_grid: int = 5          # values of an accepted entry's secondary parameter tried (geometric)
 
 
 def load_settings(path="diagnosis.yaml") -> Settings:
@@ -87,11 +88,20 @@ class Candidate:
     origin: float = 0.0           # the search value at which the candidate changes nothing
     discovery: Discovery | None = None
     equation: str = ""
+    secondary: tuple = ()         # library.Parameter: fitted once the candidate is accepted (`_fit_secondary`)
+    held: dict = dataclasses.field(default_factory=dict)   # secondary name -> (value, unit) other than the model's
 
     def describe(self, value: float) -> str:
         if self.discovery is not None:
             return self.discovery.words(value)
-        return self.words
+        return self.words + "".join(f"; {k} = {v:.4g} {u}" for k, (v, u) in self.held.items())
+
+    def holding(self, p, value: float) -> "Candidate":
+        """This candidate with its secondary parameter `p` held at `value` (physical units)."""
+        def build(variant: Variant, x: float, inner=self.build) -> Variant:
+            return inner(variant, x).with_changes(coefficients={p.coefficient: float(value)})
+
+        return dataclasses.replace(self, build=build, held={**self.held, p.name: (float(value), p.unit)})
 
 
 LOCATED_SITES = {  # library site -> located sites where it shows first
@@ -139,7 +149,8 @@ def library_candidate(effect: library.Effect, base: laws.Coefficients, excited: 
 
     return Candidate(effect.name, effect.kind, effect.family, effect.site, effect.primary.unit, effect.words,
                      low, high, build, effect.physical, effect.separate, effect.primary.plausible,
-                     off=library.SENSOR_OFF.get(p.coefficient, 0.0), origin=origin, equation=effect.equation)
+                     off=library.SENSOR_OFF.get(p.coefficient, 0.0), origin=origin, equation=effect.equation,
+                     secondary=effect.secondary)
 
 
 def discovered_candidate(found: Discovery) -> Candidate:
@@ -641,6 +652,29 @@ def _exchange(data, base, chosen, ranking, settings, current_sse, current_errors
     return None
 
 
+def _fit_secondary(data, base, chosen, settings) -> None:
+    """Each accepted entry's secondary parameters (the ground's damping) on a grid, geometric between their
+    bounds and the model's own value, the magnitude refitted at each (beside the other accepted effects); a
+    value other than the model's is kept only when held-out strides prefer it (paired t of at least `min_t`)."""
+    for i in range(len(chosen)):
+        for p in chosen[i]["candidate"].secondary:
+            r, others = chosen[i], chosen[:i] + chosen[i + 1:]
+            stack = Stack(base, others)
+            sim = simulate_variants(data, [stack.variant()])
+            sse, errors = sim["sse"][0], _errors(data, {k: v[0] for k, v in sim["pred"].items()})
+            own = float(getattr(stack.variant().coefficients, p.coefficient))
+            values = sorted({own, *np.geomspace(p.low, p.high, settings.secondary_grid).tolist()})
+            tried = {v: _search(data, stack, [r["candidate"].holding(p, v)], settings, sse, errors)[0] for v in values}
+            value = min(tried, key=lambda v: tried[v]["held_sse"].sum())
+            best = tried[value]
+            if value == own or not best["significant"] or \
+                    _paired_t(tried[own]["held_sse"], best["held_sse"]) < settings.min_t:
+                continue
+            _polish(data, base, others, best, settings, sse, errors)
+            best.update({k: r[k] for k in ("location", "ties", "alternatives") if k in r})
+            chosen[i] = best
+
+
 def _cumulative_errors(data, base, chosen, fold) -> None:
     """Held-out E_p/E_v/E_t after each accepted effect and those before it, at their final magnitudes."""
     for k in range(1, len(chosen) + 1):
@@ -704,6 +738,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
             current_sse, current_errors = _revisit(data, base, chosen, settings, current_sse, current_errors)
     # a refit beside later effects may move a sensor fault to where no real sensor has one: then it is not one
     chosen = [r for r in chosen if r["candidate"].kind != "sensor" or _plausible(r)]
+    _fit_secondary(data, base, chosen, settings)
     current = Stack(base, chosen).variant()
     _cumulative_errors(data, base, chosen, fold)
     final_sim = simulate_variants(data, [base, current], keep_series=True)
@@ -727,7 +762,9 @@ def _with_chosen_sites(locations: list[Location], chosen: list[dict], settings: 
         strongest[loc.site] = max(strongest.get(loc.site, -math.inf), loc.ratio)
     added = [loc for loc in fit_locations(chosen, candidate_sites, settings.locate_threshold, settings.min_t)
              if loc.ratio > strongest.get(loc.site, -math.inf)]
-    return sorted(locations + added, key=lambda loc: -loc.ratio)
+    replaced = {loc.site for loc in added}
+    kept = [loc for loc in locations if loc.basis != "fit" or loc.site not in replaced]
+    return sorted(kept + added, key=lambda loc: -loc.ratio)
 
 
 def _rms_table(sim: dict, row: int, data: StrideData) -> dict:
@@ -756,6 +793,7 @@ def verdict(chosen: list[dict], left: list[Location] | None = None, threshold: f
             text = f"{c.name}: {c.describe(r['value'])}"
         else:
             text = f"{c.name} = {r['magnitude']:.4g} {c.unit}".rstrip()
+            text += "".join(f" ({k} {v:.4g} {u})" for k, (v, u) in c.held.items())
         if r.get("ties"):
             text += " (or " + " or ".join(t["name"] for t in r["ties"]) + ": not separable on this data)"
         parts.append(text)

@@ -40,6 +40,8 @@ def _entry(r: dict) -> dict:
     if c.discovery is not None:
         entry["terms"] = [{"term": key, "coefficient": coef * r["value"], "unit": unit, "words": words}
                           for key, coef, words, unit in c.discovery.terms()]
+    if c.held:
+        entry["secondary"] = [{"name": k, "value": v, "unit": u} for k, (v, u) in c.held.items()]
     return entry
 
 
@@ -48,15 +50,12 @@ def verdict_entries(result: dict) -> list[dict]:
     out = []
     for r in result["chosen"]:
         c = r["candidate"]
-        entry = {"name": c.name, "kind": c.kind, "family": c.family, "site": c.site,
-                 "magnitude": _num(r["magnitude"]), "unit": c.unit, "words": c.describe(r["value"]),
-                 "equation": c.equation, "held_out_trajectory_reduction": r["reduction"],
-                 "not_separable_from": [t["name"] for t in r.get("ties", [])],
-                 "look_alikes": [_entry(t) for t in r.get("ties", [])],
-                 "to_separate": sorted({c.separate, *(t["candidate"].separate for t in r.get("ties", []))} - {""})}
-        if c.discovery is not None:
-            entry["terms"] = [{"term": key, "coefficient": coef * r["value"], "unit": unit, "words": words}
-                              for key, coef, words, unit in c.discovery.terms()]
+        entry = _entry(r)
+        entry.update({"held_out_trajectory_reduction": r["reduction"],
+                      "not_separable_from": [t["name"] for t in r.get("ties", [])],
+                      "look_alikes": [_entry(t) for t in r.get("ties", [])],
+                      "to_separate": sorted({c.separate, *(t["candidate"].separate for t in r.get("ties", []))}
+                                            - {""})})
         out.append(entry)
     return out
 

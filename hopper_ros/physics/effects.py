@@ -7,7 +7,8 @@ is written once, so the simulated robot (config/sim.yaml `effects:`), identifica
 (`hopper identify --effects`) and the mismatch tool (`hopper diagnose`) share it.
 
 Families: flight resistance, the boom, touchdown, the ground, the leg in stance, the hip actuator,
-the lift-off collision, sensors. A magnitude of an entry is its first parameter's value.
+the lift-off collision, sensors. A magnitude of an entry is its first parameter's value; further
+parameters are secondary (fitted once the entry is accepted).
 """
 
 from __future__ import annotations
@@ -49,6 +50,12 @@ class Effect:
     @property
     def primary(self) -> Parameter:
         return self.parameters[0]
+
+    @property
+    def secondary(self) -> tuple:
+        """Parameters fitted after the magnitude, on a grid between their bounds (the ground's damping beside
+        its stiffness); the model's own coefficient until the data ask for another."""
+        return self.parameters[1:]
 
     def search_bounds(self, base) -> tuple[float, float]:
         """(low, high) of the primary parameter's search, in search units (1/value for `inverse`)."""
@@ -146,10 +153,11 @@ LIBRARY: tuple[Effect, ...] = (
        "v_across+ = (1 - c_c) v_across-", "a share of the velocity across the leg is lost at touchdown (the leg's "
        "and rotor's inertia)", SPEEDS),
     # ---- the ground
-    _e("ground_compliance", "ground", "stance_leg", "along",
-       Parameter("k_g", "N/m", 0.0, 1e-4, "ground_stiffness", inverse=True),
-       "k_g depth + d_g depth' = F_z  (massless toe, d_g 250 N s/m)", "the ground gives under the toe like a spring "
-       "and damper", HEIGHTS),
+    Effect("ground_compliance", "ground", "stance_leg", "along",
+           (Parameter("k_g", "N/m", 0.0, 1e-4, "ground_stiffness", inverse=True),
+            Parameter("d_g", "N s/m", 60.0, 1000.0, "ground_damping")),
+           "k_g depth + d_g depth' = F_z  (massless toe)", "the ground gives under the toe like a spring "
+           "and damper", HEIGHTS),
     _e("ground_height", "ground", "touchdown", "vertical",
        Parameter("h_g", "m", -0.02, 0.02, "ground_height"),
        "touchdown at z = h_g + rho_0 cos(theta)", "the ground is higher than the model has it (or the leg longer at "
