@@ -52,6 +52,7 @@ class Settings:
     liftoff_window: float = 0.003
     exchange: int = 3                # runners-up tried as the partner of an exchanged effect
     polish: int = 3                  # passes of the joint refit of an accepted effect with the earlier ones
+    restarts: int = 3                # first-round runners-up that start the rounds again (a residual left)
     secondary_grid: int = 5          # values of an accepted entry's secondary parameter tried (geometric)
 
 
@@ -455,16 +456,6 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     return top, ties
 
 
-def _explaining(ranking: list[dict], settings: Settings) -> list[dict]:
-    """The changes of the model (physics or discovered) that pass every guard: the best by held-out reduction and
-    those not worse than it on held-out strides (paired t below `tie_t`)."""
-    passed = [r for r in ranking if r["candidate"].kind != "sensor" and not r["rejected"]]
-    if not passed:
-        return []
-    top = max(passed, key=lambda r: r["reduction"])
-    return [r for r in passed if r is top or _paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t]
-
-
 def _paired_t(worse: np.ndarray, better: np.ndarray) -> float:
     """One-sided t over strides that `worse` fits held-out strides worse than `better`."""
     d = np.log(worse / better)
@@ -544,8 +535,9 @@ def _score(r: dict, data, base_sse: np.ndarray, base_errors: dict, settings: Set
     return r
 
 
-def _held_out_variants(data: StrideData, base: Variant, chosen: list[dict], fold: np.ndarray) -> dict:
-    """Per-stride next apex with the chosen effects at the magnitudes fitted without the stride's fold."""
+def _held_out(data: StrideData, base: Variant, chosen: list[dict], fold: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Per stride, the trajectory SSE and the next apex with the chosen effects at the magnitudes fitted without
+    the stride's fold."""
     folds = list(np.unique(fold))
     variants = []
     for fi in range(len(folds)):
@@ -554,8 +546,13 @@ def _held_out_variants(data: StrideData, base: Variant, chosen: list[dict], fold
             v = r["candidate"].build(v, float(r["fold_values"][fi]))
         variants.append(v)
     sim = simulate_variants(data, variants)
-    idx = np.array([folds.index(f) for f in fold])
-    return {k: sim["pred"][k][idx, np.arange(len(fold))] for k in sim["pred"]}
+    rows, cols = np.array([folds.index(f) for f in fold]), np.arange(len(fold))
+    return sim["sse"][rows, cols], {k: sim["pred"][k][rows, cols] for k in sim["pred"]}
+
+
+def _held_out_variants(data: StrideData, base: Variant, chosen: list[dict], fold: np.ndarray) -> dict:
+    """Per-stride next apex with the chosen effects at the magnitudes fitted without the stride's fold."""
+    return _held_out(data, base, chosen, fold)[1]
 
 
 def _search(data, stack, candidates, settings, base_sse, base_errors) -> list[dict]:
@@ -654,8 +651,9 @@ def _exchange(data, base, chosen, ranking, settings, current_sse, current_errors
 
 def _fit_secondary(data, base, chosen, settings) -> None:
     """Each accepted entry's secondary parameters (the ground's damping) on a grid, geometric between their
-    bounds and the model's own value, the magnitude refitted at each (beside the other accepted effects); a
-    value other than the model's is kept only when held-out strides prefer it (paired t of at least `min_t`)."""
+    bounds, with the model's own value in place of a grid value within half a step of it; the magnitude is
+    refitted at each (beside the other accepted effects), and a value other than the model's is kept only
+    when held-out strides prefer it (paired t of at least `min_t`)."""
     for i in range(len(chosen)):
         for p in chosen[i]["candidate"].secondary:
             r, others = chosen[i], chosen[:i] + chosen[i + 1:]
@@ -663,7 +661,9 @@ def _fit_secondary(data, base, chosen, settings) -> None:
             sim = simulate_variants(data, [stack.variant()])
             sse, errors = sim["sse"][0], _errors(data, {k: v[0] for k, v in sim["pred"].items()})
             own = float(getattr(stack.variant().coefficients, p.coefficient))
-            values = sorted({own, *np.geomspace(p.low, p.high, settings.secondary_grid).tolist()})
+            grid = np.geomspace(p.low, p.high, settings.secondary_grid)
+            step = (p.high / p.low) ** (0.5 / max(settings.secondary_grid - 1, 1))   # half a grid step
+            values = [own] + [float(v) for v in grid if not own / step < v < own * step]
             tried = {v: _search(data, stack, [r["candidate"].holding(p, v)], settings, sse, errors)[0] for v in values}
             value = min(tried, key=lambda v: tried[v]["held_sse"].sum())
             best = tried[value]
@@ -695,15 +695,39 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     fold = _folds(len(data.strides), settings.folds)
     current_sse = base_sim["sse"][0]
     base_errors = current_errors = _errors(data, {k: v[0] for k, v in base_sim["pred"].items()})
-    chosen, rounds, discoveries = [], [], []
-    first_location = None
     excited = {"command": float(np.max(np.abs(data.strides.tau_0), initial=0.0))}
-    for round_index in range(settings.max_effects):
+    log = {"rounds": [], "discoveries": []}
+    chosen, _, _ = _rounds(data, base, settings, excited, [], current_sse, current_errors, log)
+    rounds, discoveries = log["rounds"], log["discoveries"]
+    # a refit beside later effects may move a sensor fault to where no real sensor has one: then it is not one
+    chosen = [r for r in chosen if r["candidate"].kind != "sensor" or _plausible(r)]
+    if chosen and any(loc.ratio >= settings.locate_threshold for loc in locate(data, Stack(base, chosen).variant())[0]):
+        chosen = _restarts(data, base, settings, excited, chosen, log, fold)
+    _fit_secondary(data, base, chosen, settings)
+    current = Stack(base, chosen).variant()
+    _cumulative_errors(data, base, chosen, fold)
+    final_sim = simulate_variants(data, [base, current], keep_series=True)
+    before = base_errors
+    after = _errors(data, _held_out_variants(data, base, chosen, fold)) if chosen else before
+    first_location = _with_chosen_sites(log["first_location"], chosen, settings)
+    residual_location = locate(data, current)[0] if chosen else first_location
+    return {"data": data, "rounds": rounds, "chosen": chosen, "before_phase": _rms_table(final_sim, 0, data),
+            "after_phase": _rms_table(final_sim, 1, data), "before": before, "after": after,
+            "base_series": base_sim["series"], "after_series": final_sim["series"], "location": first_location,
+            "residual_location": residual_location, "discoveries": discoveries,
+            "verdict": verdict(chosen, residual_location if chosen else first_location, settings.locate_threshold),
+            "settings": settings, "model_effects": dict(model_effects or {})}
+
+
+def _rounds(data, base, settings, excited, chosen, current_sse, current_errors, log):
+    """Greedy rounds from the effects in `chosen` (their held-out SSE and errors given) up to `max_effects`:
+    locate, screen the library, discover at the located sites, search, accept the best that passes every guard
+    (or exchange an accepted one), refit jointly and revisit. `log` collects the rankings, the discoveries and
+    the first round's locations and ranking. Returns (chosen, held-out SSE, errors)."""
+    for _ in range(len(chosen), settings.max_effects):
         stack = Stack(base, list(chosen))
         current = stack.variant()
         locations, sets = locate(data, current)
-        if first_location is None:
-            first_location = locations
         located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
         taken = {r["name"] for r in chosen}
         cands = [library_candidate(e, current.coefficients, excited) for e in library.LIBRARY + library.SENSORS
@@ -712,15 +736,13 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
         for site in sorted(located & set(LOCATE_SITES)):     # (touchdown timing has no residual samples)
             found = discover_site(site, sets)
             if found is not None and f"discovered_{site}" not in taken:
-                discoveries.append(found)
+                log["discoveries"].append(found)
                 cands.append(discovered_candidate(found))
         ranking = _search(data, stack, cands, settings, current_sse, current_errors)
-        if round_index == 0:
-            first_location = sorted(first_location + fit_locations(_explaining(ranking, settings), candidate_sites,
-                                                                   settings.locate_threshold, settings.min_t),
-                                    key=lambda loc: -loc.ratio)
+        log.setdefault("first_location", locations)
+        log.setdefault("first_ranking", ranking)
         top, ties = _choose(ranking, settings)
-        rounds.append(ranking)
+        log["rounds"].append(ranking)
         if top is None and chosen:
             trial = _exchange(data, base, chosen, ranking, settings, current_sse, current_errors)
             if trial is not None:
@@ -736,35 +758,44 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
         current_sse, current_errors = top["held_sse"], top["errors"]
         if len(chosen) > 1:
             current_sse, current_errors = _revisit(data, base, chosen, settings, current_sse, current_errors)
-    # a refit beside later effects may move a sensor fault to where no real sensor has one: then it is not one
-    chosen = [r for r in chosen if r["candidate"].kind != "sensor" or _plausible(r)]
-    _fit_secondary(data, base, chosen, settings)
-    current = Stack(base, chosen).variant()
-    _cumulative_errors(data, base, chosen, fold)
-    final_sim = simulate_variants(data, [base, current], keep_series=True)
-    before = base_errors
-    after = _errors(data, _held_out_variants(data, base, chosen, fold)) if chosen else before
-    first_location = _with_chosen_sites(first_location, chosen, settings)
-    residual_location = locate(data, current)[0] if chosen else first_location
-    return {"data": data, "rounds": rounds, "chosen": chosen, "before_phase": _rms_table(final_sim, 0, data),
-            "after_phase": _rms_table(final_sim, 1, data), "before": before, "after": after,
-            "base_series": base_sim["series"], "after_series": final_sim["series"], "location": first_location,
-            "residual_location": residual_location, "discoveries": discoveries,
-            "verdict": verdict(chosen, residual_location if chosen else first_location, settings.locate_threshold),
-            "settings": settings, "model_effects": dict(model_effects or {})}
+    return chosen, current_sse, current_errors
+
+
+def _restarts(data, base, settings, excited, chosen, log, fold) -> list[dict]:
+    """When the accepted set leaves a located residual unexplained, its first effect may stand in for a pair it
+    is not part of (a gain fits a toe mass and a delay together better than either alone): the first round's
+    next-best candidates, those that failed only an apex guard alone as well (their partner is missing), each
+    start the rounds again. A set found so replaces the accepted one when it holds two effects or more, each of
+    which passed its guards beside the others, and fits held-out strides better (paired t of at least
+    `min_t`)."""
+    first = chosen[0]["name"]
+    pool = [r for r in log["first_ranking"] if r["name"] != first and r["reduction"] >= settings.min_reduction
+            and r["t"] >= settings.min_t and r["candidate"].kind != "sensor"][:settings.restarts]
+    best, best_sse = chosen, _held_out(data, base, chosen, fold)[0]
+    for r in pool:
+        start = dict(r, ties=[], location=[], alternatives=[x["candidate"] for x in log["first_ranking"]
+                                                             [:settings.screen] if x["name"] != r["name"]])
+        trial, _, _ = _rounds(data, base, settings, excited, [start], r["held_sse"], r["errors"],
+                              {"rounds": [], "discoveries": []})
+        trial = [e for e in trial if e["candidate"].kind != "sensor" or _plausible(e)]
+        if len(trial) < 2:
+            continue
+        sse = _held_out(data, base, trial, fold)[0]
+        if sse.sum() < best_sse.sum() and _paired_t(best_sse, sse) >= settings.min_t:
+            best, best_sse = trial, sse
+    return best
 
 
 def _with_chosen_sites(locations: list[Location], chosen: list[dict], settings: Settings) -> list[Location]:
-    """Each accepted effect located by its own fit (its held-out gain over the model without it, the others kept)
-    where nothing stronger stands at its site: the second effect of a pair is judged beside the first."""
+    """The force locations with each accepted effect located by its own fit (its held-out gain over the model
+    without it, the others kept; the second effect of a pair is judged beside the first) where no force
+    location stands stronger at its site."""
     strongest = {}
     for loc in locations:
         strongest[loc.site] = max(strongest.get(loc.site, -math.inf), loc.ratio)
     added = [loc for loc in fit_locations(chosen, candidate_sites, settings.locate_threshold, settings.min_t)
              if loc.ratio > strongest.get(loc.site, -math.inf)]
-    replaced = {loc.site for loc in added}
-    kept = [loc for loc in locations if loc.basis != "fit" or loc.site not in replaced]
-    return sorted(kept + added, key=lambda loc: -loc.ratio)
+    return sorted(locations + added, key=lambda loc: -loc.ratio)
 
 
 def _rms_table(sim: dict, row: int, data: StrideData) -> dict:
