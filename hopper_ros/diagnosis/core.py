@@ -701,7 +701,8 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     rounds, discoveries = log["rounds"], log["discoveries"]
     # a refit beside later effects may move a sensor fault to where no real sensor has one: then it is not one
     chosen = [r for r in chosen if r["candidate"].kind != "sensor" or _plausible(r)]
-    if chosen and any(loc.ratio >= settings.locate_threshold for loc in locate(data, Stack(base, chosen).variant())[0]):
+    left = locate(data, Stack(base, chosen).variant())[0] if chosen else []
+    if any(loc.ratio >= settings.locate_threshold for loc in left):
         chosen = _restarts(data, base, settings, excited, chosen, log, fold)
     _fit_secondary(data, base, chosen, settings)
     current = Stack(base, chosen).variant()
