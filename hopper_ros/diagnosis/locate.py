@@ -296,8 +296,8 @@ def fit_locations(results: list[dict], sites, threshold: float, min_t: float) ->
     """Locate by fit: per site, the best change acting there among `results` (the accepted changes of the model,
     each fitted on training strides and judged on held-out ones against the model without it). Re-simulations
     say where a correction of the model removes the residual when the force residuals, one stride at a time,
-    are too weak to stand above the noise (a 6 % touchdown loss across the leg, a dry friction). `sites` maps a candidate to its located sites; the ratio is t scaled so that
-    t = `min_t` is `threshold`."""
+    are too weak to stand above the noise (a 6 % touchdown loss across the leg, a dry friction). `sites` maps a
+    candidate to its located sites; the ratio is t scaled so that t = `min_t` is `threshold`."""
     best = {}
     for r in results:
         for site in sites(r["candidate"]):
