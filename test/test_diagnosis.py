@@ -137,3 +137,23 @@ def test_the_researchers_loop_with_files_alone(results, tmp_path):
     assert again["model_effects"] and name in again["model_effects"]
     assert not any(r["name"] == name for r in again["chosen"]), again["verdict"]
     assert again["before"]["E_p"] < first["before"]["E_p"]
+
+
+def test_a_secondary_parameter_is_held_and_said():
+    """The ground's damping is a secondary parameter of its compliance: a candidate holding it builds models
+    with that damping at every magnitude, and its words and the verdict say the value."""
+    from hopper_ros.diagnosis.core import base_variant, library_candidate, verdict
+    from hopper_ros.physics.params import load_params
+
+    base = base_variant(load_params())
+    candidate = library_candidate(library.get("ground_compliance"), base.coefficients)
+    (damping,) = candidate.secondary
+    assert damping.coefficient == "ground_damping" and candidate.held == {}
+    held = candidate.holding(damping, 150.0)
+    for value in (1e-5, 5e-5):
+        built = held.build(base, value).coefficients
+        assert built.ground_damping == 150.0 and built.ground_stiffness == pytest.approx(1.0 / value)
+    assert candidate.build(base, 1e-5).coefficients.ground_damping == base.coefficients.ground_damping
+    assert "d_g = 150 N s/m" in held.describe(1e-5)
+    line = verdict([{"candidate": held, "magnitude": 4e4, "value": 2.5e-5}])
+    assert line == "missing: ground_compliance = 4e+04 N/m (d_g 150 N s/m)", line
