@@ -767,12 +767,14 @@ def _restarts(data, base, settings, excited, chosen, log, fold) -> list[dict]:
     is not part of (a gain fits a toe mass and a delay together better than either alone): the first round's
     next-best candidates, those that failed only an apex guard alone as well (their partner is missing), each
     start the rounds again. A set found so replaces the accepted one when it holds two effects or more, each of
-    which passed its guards beside the others, and fits held-out strides better (paired t of at least
-    `min_t`)."""
+    which passed its guards beside the others, and beats the accepted set as an added effect would beat it: the
+    held-out trajectory SSE lower by `min_reduction` with a paired t of at least `min_t`, no held-out E_p, E_v,
+    E_t worse by more than `apex_tolerance`."""
     first = chosen[0]["name"]
     pool = [r for r in log["first_ranking"] if r["name"] != first and r["reduction"] >= settings.min_reduction
             and r["t"] >= settings.min_t and r["candidate"].kind != "sensor"][:settings.restarts]
-    best, best_sse = chosen, _held_out(data, base, chosen, fold)[0]
+    best_sse, best_pred = _held_out(data, base, chosen, fold)
+    best, best_errors = chosen, _errors(data, best_pred)
     for r in pool:
         start = dict(r, ties=[], location=[], alternatives=[x["candidate"] for x in log["first_ranking"]
                                                              [:settings.screen] if x["name"] != r["name"]])
@@ -781,9 +783,11 @@ def _restarts(data, base, settings, excited, chosen, log, fold) -> list[dict]:
         trial = [e for e in trial if e["candidate"].kind != "sensor" or _plausible(e)]
         if len(trial) < 2:
             continue
-        sse = _held_out(data, base, trial, fold)[0]
-        if sse.sum() < best_sse.sum() and _paired_t(best_sse, sse) >= settings.min_t:
-            best, best_sse = trial, sse
+        sse, pred = _held_out(data, base, trial, fold)
+        errors = _errors(data, pred)
+        if (1.0 - sse.sum() / best_sse.sum() >= settings.min_reduction and _paired_t(best_sse, sse) >= settings.min_t
+                and all(errors[k] <= best_errors[k] * (1 + settings.apex_tolerance) for k in errors)):
+            best, best_sse, best_errors = trial, sse, errors
     return best
 
 
