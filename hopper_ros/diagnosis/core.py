@@ -52,7 +52,8 @@ class Settings:
     liftoff_window: float = 0.003
     exchange: int = 3                # runners-up tried as the partner of an exchanged effect
     polish: int = 3                  # passes of the joint refit of an accepted effect with the earlier ones
-    restarts: int = 3                # first-round runners-up that start the rounds again (a residual left)
+    restarts: int = 3                # first-round runners-up that start the rounds again ...
+    restart_threshold: float = 5.0   # ... when the accepted set leaves a residual this far over the noise level
     secondary_grid: int = 5          # values of an accepted entry's secondary parameter tried (geometric)
 
 
@@ -702,7 +703,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     # a refit beside later effects may move a sensor fault to where no real sensor has one: then it is not one
     chosen = [r for r in chosen if r["candidate"].kind != "sensor" or _plausible(r)]
     left = locate(data, Stack(base, chosen).variant())[0] if chosen else []
-    if any(loc.ratio >= settings.locate_threshold for loc in left):
+    if any(loc.ratio >= settings.restart_threshold for loc in left):
         chosen = _restarts(data, base, settings, excited, chosen, log, fold)
     _fit_secondary(data, base, chosen, settings)
     current = Stack(base, chosen).variant()
@@ -763,7 +764,7 @@ def _rounds(data, base, settings, excited, chosen, current_sse, current_errors, 
 
 
 def _restarts(data, base, settings, excited, chosen, log, fold) -> list[dict]:
-    """When the accepted set leaves a located residual unexplained, its first effect may stand in for a pair it
+    """When the accepted set leaves a residual clearly above the noise (`restart_threshold`), its first effect may stand in for a pair it
     is not part of (a gain fits a toe mass and a delay together better than either alone): the first round's
     next-best candidates, those that failed only an apex guard alone as well (their partner is missing), each
     start the rounds again. A set found so replaces the accepted one when it holds two effects or more, each of
