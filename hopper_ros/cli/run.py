@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 HELP = "run a registered node in this process (like `ros2 run hopper_ros NODE`)"
@@ -42,4 +43,11 @@ def main(args: argparse.Namespace) -> int:
         print(f"hopper run: error: {exc}", file=sys.stderr)
         return 2
     status = entry([args.node, *args.node_args])
-    return 0 if status is None else int(status)
+    status = 0 if status is None else int(status)
+    if status:
+        # a node that failed to start has said why; the interpreter's teardown of what rclpy left behind can
+        # only turn that exit status into a crash
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status

@@ -20,6 +20,7 @@ it return 1.
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import sys
@@ -186,6 +187,7 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
             executor.shutdown(timeout_sec=1.0)
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        gc.collect()    # a node whose constructor failed (bad config) is freed while its context lives: left to the
+        rclpy.try_shutdown()   # interpreter's exit, rcl handles outlive their context and the process may crash
         stop.uninstall()
     return status
