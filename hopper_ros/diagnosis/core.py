@@ -24,7 +24,8 @@ from hopper_ros.physics.metrics import position_error_pct, time_error_pct, veloc
 from hopper_ros.physics.params import ModelParams
 
 from .data import LEAD_RESOLVED, PHASES, StrideData, prepare
-from .discover import Discovery, discover_site
+from .discover import Discovery, discover_site, hinge_of
+from .ringing import CHANNEL_SITE, Ringing, discover_ringing
 from .locate import SITES as LOCATE_SITES
 from .locate import Location, fit_locations, locate
 from .simulate import Variant, simulate_variants
@@ -158,13 +159,43 @@ def library_candidate(effect: library.Effect, base: laws.Coefficients, excited: 
 def discovered_candidate(found: Discovery) -> Candidate:
     def build(variant: Variant, value: float, found=found) -> Variant:
         old = getattr(variant.coefficients, found.field)
-        new = tuple(float(o) + value * c for o, c in zip(old, found.coefficients))
-        return variant.with_changes(coefficients={found.field: new})
+        new = {found.field: tuple(float(o) + value * c for o, c in zip(old, found.coefficients))}
+        hinge = hinge_of(found.field)
+        if hinge is not None:
+            new[hinge[1]] = found.knot
+        return variant.with_changes(coefficients=new)
 
     return Candidate(f"discovered_{found.site}", "discovered", "discovered", found.site, "x fitted terms",
                      found.words(), 0.0, 2.0, build, float,
                      "a force plate, or strides that lengthen the phase where the terms act", discovery=found,
                      equation=" + ".join(f"{c:+.4g} {k}" for k, c, _, _ in found.terms()))
+
+
+def ringing_candidate(found: Ringing) -> Candidate:
+    def build(variant: Variant, value: float, found=found) -> Variant:
+        return variant.with_changes(sensors=found.sensors(value))
+
+    (a, b), w = found.amplitudes, f"2 pi {found.frequency:.4g} s"
+    return Candidate(f"discovered_{found.channel}_ringing", "discovered", "discovered", found.site, "x fitted terms",
+                     found.words(), 0.0, 2.0, build, float,
+                     "an accelerometer on the body, or the boom's modes measured by tapping it", discovery=found,
+                     equation=f"{found.channel}_meas += exp(-{found.decay:.4g} s) ({a:+.4g} sin({w}) {b:+.4g} cos({w})) m,"
+                              " s = time since lift-off")
+
+
+def _ringing_candidates(data: StrideData, located: set, taken: set, log: dict) -> list[Candidate]:
+    """A ringing channel after lift-off, where its flight site is located (found once per recording)."""
+    out = []
+    for channel, site in CHANNEL_SITE.items():
+        if site not in located or f"discovered_{channel}_ringing" in taken:
+            continue
+        if channel not in data.ringing:
+            data.ringing[channel] = discover_ringing(data, channel)
+            if data.ringing[channel] is not None:
+                log["discoveries"].append(data.ringing[channel])
+        if data.ringing[channel] is not None:
+            out.append(ringing_candidate(data.ringing[channel]))
+    return out
 
 
 # ---------------------------------------------------------------------------- ranking
@@ -399,10 +430,12 @@ def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
         why.append("held-out " + ", ".join(worse) + " worse")
     # a sensor fault changes what is measured, not the motion: the next apex it predicts is the same (a delay)
     # or moves with the measurement, so it must not be worse; physics must predict it better
-    # (then the fault must account for most of the model's residual: a small one fits what the physics left)
+    # (then the fault must account for most of the model's residual: a small one fits what the physics left;
+    # a discovered ringing need not: its discovery already showed an oscillation the smooth residual cannot make)
     c = r["candidate"]
+    measured = c.kind == "sensor" or getattr(c.discovery, "measurement", False)
     better = sum(e[k] for k in keys) <= sum(b[k] for k in keys) * (1 - settings.apex_improvement)
-    if c.kind != "sensor" and not better:
+    if not measured and not better:
         why.append("the next apex is not predicted better")
     elif c.kind == "sensor" and not better and r.get("total_reduction", 1.0) < settings.sensor_alone:
         why.append(f"the next apex is not predicted better and it explains only {100 * r['total_reduction']:.0f} % "
@@ -740,6 +773,7 @@ def _rounds(data, base, settings, excited, chosen, current_sse, current_errors, 
             if found is not None and f"discovered_{site}" not in taken:
                 log["discoveries"].append(found)
                 cands.append(discovered_candidate(found))
+        cands += _ringing_candidates(data, located, taken, log)
         ranking = _search(data, stack, cands, settings, current_sse, current_errors)
         log.setdefault("first_location", locations)
         log.setdefault("first_ranking", ranking)

@@ -108,6 +108,12 @@ class StrideData:
     model_sse: float = 1.0       # the model's own trajectory SSE (before any effect)
     touchdown_lead: float = 0.0  # [s] median: stance began this long before the model's leg met the ground
     stance_start: np.ndarray = field(default_factory=lambda: np.zeros(0))   # [s] per stride: the held leg turns
+    ringing: dict = field(default_factory=dict)   # channel -> its ringing after lift-off (`ringing`), found once
+
+    @property
+    def liftoffs(self) -> np.ndarray:
+        """[s] every stride's recorded lift-off, in order."""
+        return np.sort(self.strides.liftoff_time)
 
 
 def prepare(rec: Recording, params: ModelParams, min_strides: int, liftoff_window: float) -> StrideData:

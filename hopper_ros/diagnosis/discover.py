@@ -3,10 +3,10 @@
 Per site (flight horizontal/vertical, stance along the leg and about the hip, the velocity jumps at
 touchdown and lift-off) the bias-corrected residual forces of `locate` are regressed on the site's
 term library (`physics.laws`: powers and signs of velocities, powers of the spring's compression,
-the torque, the time since touchdown, ...) by sequentially thresholded least squares (SINDy's
-STLSQ); the threshold is chosen by cross-validation over strides (the sparsest model within one
-standard error of the best), and the model is kept only if it predicts held-out strides better than
-no term at all. The term set becomes a candidate effect whose coefficients are refitted (one scale)
+the torque, the time since touchdown, a hinge max(0, z - z_k) ...) by sequentially thresholded least
+squares (SINDy's STLSQ); the threshold, and a hinge's knot among quantiles of its variable, are chosen
+by cross-validation over strides (the sparsest model within one standard error of the best), and the
+model is kept only if it predicts held-out strides better than no term at all. The term set becomes a candidate effect whose coefficients are refitted (one scale)
 and ranked on held-out strides exactly like a library effect.
 """
 
@@ -31,8 +31,9 @@ SITE_LIBRARY = {   # site -> (term library, Coefficients field, context kind)
     "liftoff_across": (laws.JUMP_TERMS, "liftoff_across_terms", "jump"),
 }
 THRESHOLDS = (0.0, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
+KNOT_QUANTILES = (0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95)   # where a hinge term's knot may sit, over the samples
 FOLDS = 5
-MIN_T = 3.0          # held-out improvement over strides, one-sided t
+MIN_T = 1.5          # held-out improvement over strides, one-sided t
 
 
 @dataclass
@@ -43,10 +44,19 @@ class Discovery:
     keys: tuple
     explained: float          # share of the residual's variance explained on held-out strides
     t: float
+    knot: float = 0.0         # [m] where the site's hinge term (if any) engages
 
     def terms(self) -> list[tuple[str, float, str, str]]:
         library = SITE_LIBRARY[self.site][0]
-        return [(key, float(c), words, unit) for (key, words, unit, _), c in zip(library, self.coefficients) if c]
+        hinge = hinge_of(self.field)
+        out = []
+        for (key, words, unit, _), c in zip(library, self.coefficients):
+            if c:
+                if hinge and key == hinge[0]:
+                    symbol = key.split(">")[1]
+                    words = words.replace(symbol, f"{symbol} = {self.knot:.3g} m", 1)
+                out.append((key, float(c), words, unit))
+        return out
 
     def words(self, scale: float = 1.0) -> str:
         phase, direction = SITE_WORDS[self.site]
@@ -56,16 +66,33 @@ class Discovery:
         return f"{where}, {direction}: " + "; ".join(parts)
 
 
-def _context(kind: str, ctx: dict):
+def hinge_of(field: str):
+    """(term key, knot field) of the hinge term in the library of Coefficients field `field`, or None."""
+    return laws.HINGES.get(field[:-len("_terms")])
+
+
+def _context(kind: str, ctx: dict, knot: float = 0.0):
     if kind == "flight":
-        return laws.FlightContext(ctx["y"], ctx["z"], ctx["ydot"], ctx["zdot"])
+        return laws.FlightContext(ctx["y"], ctx["z"], ctx["ydot"], ctx["zdot"], knot)
     if kind == "stance":
         return laws.StanceContext(ctx["rho"], ctx["rho_dot"], ctx["rest_length"], ctx["theta"], ctx["theta_dot"],
-                                  ctx["theta_td"], ctx["since_touchdown"], ctx["torque"], ctx["command"])
+                                  ctx["theta_td"], ctx["since_touchdown"], ctx["torque"], ctx["command"], knot)
     return laws.JumpContext(ctx["along"], ctx["across"])
 
 
-def site_samples(site: str, sets) -> list[tuple[np.ndarray, np.ndarray]]:
+def _knots(site: str, sets) -> tuple:
+    """Candidate knots of the site's hinge term: quantiles of its variable over the recorded samples."""
+    if hinge_of(SITE_LIBRARY[site][1]) is None:
+        return (0.0,)
+    kind = SITE_LIBRARY[site][2]
+    values = [ctx["z"] if kind == "flight" else ctx["rest_length"] - ctx["rho"]
+              for r in sets[0] if r is not None and site in r.samples for ctx in [r.samples[site][1]]]
+    if not values:
+        return (0.0,)
+    return tuple(float(q) for q in np.quantile(np.concatenate(values), KNOT_QUANTILES))
+
+
+def site_samples(site: str, sets, knot: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per stride (design matrix, bias-corrected residual) of one site."""
     library, _, kind = SITE_LIBRARY[site]
     rec, clean, _ = sets
@@ -80,7 +107,7 @@ def site_samples(site: str, sets) -> list[tuple[np.ndarray, np.ndarray]]:
             bias = np.interp(u, bias_u[order], bias_values[order])
         else:
             bias = np.full_like(values, bias_values[0])
-        context = _context(kind, ctx)
+        context = _context(kind, ctx, knot)
         X = np.column_stack([np.broadcast_to(term(context), values.shape) for _, _, _, term in library])
         ok = np.all(np.isfinite(X), axis=1) & np.isfinite(values - bias)
         if ok.any():
@@ -107,11 +134,10 @@ def stlsq(X, y, threshold, iterations=8):
     return coef / scale
 
 
-def discover_site(site: str, sets, max_terms: int = 3) -> Discovery | None:
-    per_stride = site_samples(site, sets)
+def _cross_validate(per_stride, max_terms: int):
+    """Held-out SSE per stride for each threshold (inf where a fold's model has too many terms), the
+    zero model's SSE, and the threshold picked: the sparsest within one standard error of the best."""
     n = len(per_stride)
-    if n < 2 * FOLDS:
-        return None
     fold = np.arange(n) % FOLDS
     cv = []
     for thr in THRESHOLDS:
@@ -134,11 +160,27 @@ def discover_site(site: str, sets, max_terms: int = 3) -> Discovery | None:
     if not np.isfinite(totals).any():
         return None
     best = int(np.nanargmin(np.where(np.isfinite(totals), totals, np.nan)))
-    se = np.std(cv[best] - zero) * np.sqrt(n) if np.isfinite(totals[best]) else np.inf
+    se = np.std(cv[best] - zero) * np.sqrt(n)
     pick = max(k for k in range(len(THRESHOLDS)) if np.isfinite(totals[k]) and totals[k] <= totals[best] + se)
-    d = zero - cv[pick]
+    return cv[pick], zero, pick
+
+
+def discover_site(site: str, sets, max_terms: int = 3) -> Discovery | None:
+    trials = []
+    for knot in _knots(site, sets):
+        per_stride = site_samples(site, sets, knot)
+        if len(per_stride) < 2 * FOLDS:
+            return None
+        found = _cross_validate(per_stride, max_terms)
+        if found is not None:
+            trials.append((found[0].sum(), knot, per_stride, *found))
+    if not trials:
+        return None
+    _, knot, per_stride, held, zero, pick = min(trials, key=lambda trial: trial[0])
+    n = len(per_stride)
+    d = zero - held
     t = float(d.mean() / (d.std(ddof=1) / np.sqrt(n))) if d.std(ddof=1) > 0 else 0.0
-    explained = float(1.0 - totals[pick] / zero.sum()) if zero.sum() > 0 else 0.0
+    explained = float(1.0 - held.sum() / zero.sum()) if zero.sum() > 0 else 0.0
     if t < MIN_T or explained <= 0:
         return None
     X = np.vstack([p[0] for p in per_stride])
@@ -147,4 +189,7 @@ def discover_site(site: str, sets, max_terms: int = 3) -> Discovery | None:
     if not np.any(coef):
         return None
     library, field, _ = SITE_LIBRARY[site]
-    return Discovery(site, field, tuple(float(c) for c in coef), tuple(k for k, *_ in library), explained, t)
+    hinge = hinge_of(field)
+    used = hinge is not None and coef[[k for k, *_ in library].index(hinge[0])] != 0
+    return Discovery(site, field, tuple(float(c) for c in coef), tuple(k for k, *_ in library), explained, t,
+                     knot if used else 0.0)

@@ -24,6 +24,7 @@ from scipy.signal import savgol_filter
 from hopper_ros.physics import lanes, laws
 
 from .data import LEAD_RESOLVED, StrideData
+from .ringing import CHANNEL_SITE, ringing, since_liftoff
 from .simulate import Variant
 
 FLIGHT_WINDOW = 71     # samples of the Savitzky-Golay fit in flight
@@ -231,7 +232,8 @@ def _held_angles(data: StrideData, sensors: dict) -> np.ndarray:
 
 
 def _recorded(data: StrideData, sensors: dict):
-    """The recorded strides with the variant's sensor faults undone (offset, scale, delay per channel)."""
+    """The recorded strides with the variant's sensor faults undone (offset, scale, delay per channel, a
+    ringing after lift-off)."""
     s, rec = data.strides, data.rec
     channels = []
     for name in ("y", "z", "theta"):
@@ -241,7 +243,10 @@ def _recorded(data: StrideData, sensors: dict):
     out = []
     for i in range(len(s)):
         a, b = int(s.start[i]), int(s.stop[i])
-        out.append((rec.t[a:b] - s.apex_time[i], *(x[a:b] for x in channels)))
+        parts = [x[a:b] - ringing(sensors, name, since_liftoff(rec.t[a:b], data.liftoffs)) if name in CHANNEL_SITE
+                 else x[a:b]
+                 for name, x in zip(("y", "z", "theta"), channels)]
+        out.append((rec.t[a:b] - s.apex_time[i], *parts))
     return out
 
 

@@ -1,7 +1,7 @@
 """Every recorded stride re-simulated under model variants, compared with the recording.
 
 A variant is the model's coefficients (`physics.laws.Coefficients`, effects included) plus sensor
-faults (delay, scale, offset per channel). All (variant, stride) pairs run as lanes of one
+faults (delay, scale, offset per channel, a discovered ringing after lift-off: `ringing`). All (variant, stride) pairs run as lanes of one
 vectorised integration (`physics.lanes`), from the recorded apex with the recorded inputs.
 """
 
@@ -14,6 +14,7 @@ import numpy as np
 from hopper_ros.physics import lanes, laws
 from hopper_ros.physics.effects import SENSOR_OFF
 
+from . import ringing
 from .data import PHASES, StrideData
 
 CHANNELS = ("y", "z", "theta")
@@ -49,6 +50,8 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
     ns, nv = len(s), len(variants)
     coef = lanes.stack([v.coefficients for v in variants], ns)
     sens = {k: np.repeat(np.array([v.sensors.get(k, SENSOR_OFF[k]) for v in variants]), ns) for k in SENSOR_OFF}
+    rings = {ch: {ringing.key(ch, p): np.array([v.sensors.get(ringing.key(ch, p), 0.0) for v in variants])[:, None]
+                  for p in ringing.KEYS} for ch in ringing.CHANNEL_SITE}
     z0 = (np.tile(s.apex_height, nv) - sens["z_offset"]) / sens["z_scale"]
     theta_td = (np.tile(s.touchdown_angle, nv) - sens["theta_offset"]) / sens["theta_scale"]
     res = lanes.simulate_lanes(coef, z0, np.tile(s.forward_speed, nv) / sens["y_scale"], theta_td,
@@ -82,6 +85,8 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
                 val = val * sens["y_scale"][li, None]
             else:
                 val = val * sens[f"{ch}_scale"][li, None] + sens[f"{ch}_offset"][li, None]
+            if ch in rings:
+                val = val + ringing.ringing(rings[ch], ch, ringing.since_liftoff(tk, data.liftoffs))
             r = (meas[ch][None, :] - val) / data.sigma[ch]
             r = np.where(np.isfinite(r), r, 1e3)
             if ch == "theta":

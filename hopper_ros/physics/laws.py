@@ -71,6 +71,8 @@ FLIGHT_Z_TERMS = (
      lambda c: smooth_sign(c.zdot)),
     ("z", "a vertical force proportional to the height (a spring pulling the boom)", "N/m", lambda c: c.z),
     ("ydot", "a vertical force proportional to the forward speed", "N s/m", lambda c: c.ydot),
+    ("z>z_k", "a force proportional to the height above z_k (something that engages above a height: "
+     "a tether or cable going taut, a stop)", "N/m", lambda c: np.maximum(c.z - c.knot, 0.0)),
 )
 LEG_TERMS = (   # along the leg, positive pushing the body away from the toe
     ("1", "a constant force along the leg", "N", lambda c: np.ones_like(c.rho)),
@@ -83,7 +85,11 @@ LEG_TERMS = (   # along the leg, positive pushing the body away from the toe
      lambda c: -smooth_sign(c.rho_dot)),
     ("t", "a force growing with the time since touchdown", "N/s", lambda c: c.since_touchdown),
     ("tau/rho", "a force along the leg proportional to the hip torque over the leg length", "1", lambda c: c.torque / c.rho),
+    ("x>x_k", "a force proportional to the compression beyond x_k (a stop or a second spring that engages)",
+     "N/m", lambda c: np.maximum(c.compression - c.knot, 0.0)),
 )
+# the term whose break point (knot) is chosen from the data, per library: (term key, Coefficients field of its knot)
+HINGES = {"flight_z": ("z>z_k", "flight_z_knot"), "leg": ("x>x_k", "leg_knot")}
 HIP_TERMS = (   # about the hip, positive increasing theta
     ("1", "a constant torque at the hip", "N m", lambda c: np.ones_like(c.rho)),
     ("tau", "a torque proportional to the commanded hip torque (actuator gain)", "1", lambda c: c.command),
@@ -162,6 +168,8 @@ class Coefficients:
     touchdown_across_terms: tuple = field(default_factory=lambda: _terms("touchdown_across"))
     liftoff_along_terms: tuple = field(default_factory=lambda: _terms("liftoff_along"))
     liftoff_across_terms: tuple = field(default_factory=lambda: _terms("liftoff_across"))
+    flight_z_knot: object = 0.0             # [m] height z_k above which the flight term z>z_k acts
+    leg_knot: object = 0.0                  # [m] compression x_k beyond which the leg term x>x_k acts
 
     @classmethod
     def from_model(cls, params, **changes) -> "Coefficients":
@@ -221,10 +229,10 @@ def _sum_terms(library, coefficients, context):
 
 
 class FlightContext:
-    __slots__ = ("y", "z", "ydot", "zdot")
+    __slots__ = ("y", "z", "ydot", "zdot", "knot")
 
-    def __init__(self, y, z, ydot, zdot):
-        self.y, self.z, self.ydot, self.zdot = y, z, ydot, zdot
+    def __init__(self, y, z, ydot, zdot, knot=0.0):
+        self.y, self.z, self.ydot, self.zdot, self.knot = y, z, ydot, zdot, knot
 
 
 def flight_acceleration(c: Coefficients, y, z, ydot, zdot):
@@ -241,7 +249,7 @@ def flight_acceleration(c: Coefficients, y, z, ydot, zdot):
     if "flight_friction_z" in on:
         az = az - c.flight_friction_z * smooth_sign(zdot)
     if "flight_y_terms" in on or "flight_z_terms" in on:
-        ctx = FlightContext(y, z, ydot, zdot)
+        ctx = FlightContext(y, z, ydot, zdot, c.flight_z_knot)
         ay = ay + _sum_terms(FLIGHT_Y_TERMS, c.flight_y_terms, ctx) / c.mass
         az = az + _sum_terms(FLIGHT_Z_TERMS, c.flight_z_terms, ctx) / c.mass
     return ay, az
@@ -252,12 +260,13 @@ def flight_acceleration(c: Coefficients, y, z, ydot, zdot):
 
 class StanceContext:
     __slots__ = ("rho", "rho_dot", "compression", "theta", "theta_dot", "theta_td", "since_touchdown",
-                 "torque", "command")
+                 "torque", "command", "knot")
 
-    def __init__(self, rho, rho_dot, rest_length, theta, theta_dot, theta_td, since_touchdown, torque, command):
+    def __init__(self, rho, rho_dot, rest_length, theta, theta_dot, theta_td, since_touchdown, torque, command,
+                 knot=0.0):
         self.rho, self.rho_dot, self.compression = rho, rho_dot, rest_length - rho
         self.theta, self.theta_dot, self.theta_td = theta, theta_dot, theta_td
-        self.since_touchdown, self.torque, self.command = since_touchdown, torque, command
+        self.since_touchdown, self.torque, self.command, self.knot = since_touchdown, torque, command, knot
 
 
 def leg_force(c: Coefficients, rho, rho_dot):
@@ -332,7 +341,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, *, co
         tau = tau + _sum_terms(HIP_TERMS, c.hip_terms, ctx)
     spring_only = leg_force(c, rho, approach) + c.damping * approach     # the force's parts without d rho'
     if extra_leg:
-        ctx = StanceContext(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown, tau, command)
+        ctx = StanceContext(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown, tau, command,
+                            c.leg_knot)
         spring_only = spring_only + _sum_terms(LEG_TERMS, c.leg_terms, ctx)
     depth_rate = 0.0
     if compliant is None:
