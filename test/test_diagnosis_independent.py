@@ -18,7 +18,8 @@ from diagnosis_suite import _expected, score  # noqa: E402
 from independent_plant.suite import write_suite  # noqa: E402
 
 SUBSET = ("clean_1", "flight_air_drag", "actuator_saturation", "leg_slide_coulomb", "leg_rest_length", "other_flight_lift",
-          "other_ground_higher", "sensor_z_delay", "pair_drag_gain", "pair_toemass_delay")
+          "other_ground_higher", "other_tether", "other_boom_bending", "sensor_z_delay", "pair_drag_gain",
+          "pair_toemass_delay")
 
 
 @pytest.fixture(scope="module")
@@ -103,3 +104,42 @@ def test_restart_when_the_first_choice_stands_in_for_a_pair(suite):
     greedy = max((r for r in result["rounds"][0] if r["significant"]), key=lambda r: r["reduction"])
     assert greedy["name"] not in {_expected(e)[0] for e in truth["effects"]}, greedy["name"]
     assert len(s["hits"]) == 2 and not s["false_positives"], result["verdict"]
+
+
+def _effect(truth):
+    return truth["effects"][0]["parameters"]
+
+
+def test_a_force_that_engages_above_a_height_is_found_with_its_knot(suite):
+    """A tether taut above z_c pulls only the highest apexes down: no library entry models it, the residual's
+    t over strides is weak (most strides never reach z_c). Discovery chooses the hinge's knot by
+    cross-validation and the refitted term names both the height and the stiffness."""
+    truth, result, s, _ = suite["other_tether"]
+    entry = result["chosen"][0]
+    found = entry["candidate"].discovery
+    assert found is not None and found.site == "flight_vertical", result["verdict"]
+    terms = {key: coef * entry["value"] for key, coef, _, _ in found.terms()}
+    assert set(terms) == {"z>z_k"}, terms
+    stiffness = _effect(truth)["kappa"] * truth["model"]["m_b"]
+    assert abs(-terms["z>z_k"] - stiffness) <= 0.2 * stiffness, (terms, stiffness)
+    assert abs(found.knot - _effect(truth)["z_c"]) <= 0.01, found.knot
+    assert f"z_k = {found.knot:.3g} m" in result["verdict"]
+
+
+def test_a_ringing_channel_is_modelled_as_what_the_sensor_sees(suite):
+    """The boom's bending after lift-off is in the elevation encoder, not in the body's motion: found as a
+    decaying oscillation after lift-off, its frequency, decay and amplitude as the plant has them, and written
+    in the JSON as a discovered entry with its terms in SI units."""
+    truth, result, s, folder = suite["other_boom_bending"]
+    assert [r["name"] for r in result["chosen"]] == ["discovered_z_ringing"], result["verdict"]
+    found = result["chosen"][0]["candidate"].discovery
+    plant = _effect(truth)
+    assert abs(found.frequency - plant["freq_hz"]) <= 0.05 * plant["freq_hz"], found.frequency
+    decay = plant["zeta"] * 2 * 3.141592653589793 * plant["freq_hz"]
+    assert abs(found.decay - decay) <= 0.3 * decay, (found.decay, decay)
+    amplitude = found.amplitude * result["chosen"][0]["value"]
+    assert abs(amplitude - plant["amplitude"]) <= 0.2 * plant["amplitude"], amplitude
+    doc = json.loads((folder / "other_boom_bending.verdict.json").read_text())
+    entry = doc["verdict"][0]
+    assert entry["kind"] == "discovered" and [t["unit"] for t in entry["terms"]] == ["m", "m"], entry
+    assert "rings" in entry["words"] and result["after"]["E_p"] <= result["before"]["E_p"] * 1.01

@@ -506,9 +506,8 @@ def _screen(data: StrideData, stack: Stack, candidates: list[Candidate], setting
         return candidates
     index = np.linspace(0, n - 1, min(n, settings.screen_strides)).round().astype(int)
     sub = dataclasses.replace(data, strides=data.strides.subset(index))
-    first = simulate_variants(sub, [stack.variant()])
-    errors = _errors(sub, {k: v[0] for k, v in first["pred"].items()})
-    ranked = rank_candidates(sub, stack, candidates, dataclasses.replace(settings, grid=5), first["sse"][0], errors)
+    sse, errors = _baseline(sub, stack)
+    ranked = rank_candidates(sub, stack, candidates, dataclasses.replace(settings, grid=5), sse, errors)
     # the best grid point counts too: an SSE that is not parabolic in the magnitude (a torque limit) has a
     # vertex far from its minimum on a coarse grid
     ranked.sort(key=lambda r: -max(r["fit_reduction"], r["grid_reduction"]))
@@ -620,6 +619,13 @@ def _adopt(chosen: list[dict], result: dict) -> None:
         r["value"], r["fold_values"], r["magnitude"] = value, list(folds), r["candidate"].physical(value)
 
 
+def _baseline(data, stack) -> tuple[np.ndarray, dict]:
+    """Per-stride trajectory SSE and the next-apex errors of the model `stack` (the reference its additions are
+    judged against)."""
+    sim = simulate_variants(data, [stack.variant()])
+    return sim["sse"][0], _errors(data, {k: v[0] for k, v in sim["pred"].items()})
+
+
 def _revisit(data, base, chosen, settings, current_sse, current_errors):
     """Each earlier effect tried again beside the later ones, against its round's runners-up: one that
     stood in for a pair (a lower gain for a gain and drag) is replaced, one no longer needed is dropped."""
@@ -628,8 +634,7 @@ def _revisit(data, base, chosen, settings, current_sse, current_errors):
         old = chosen[i]
         others = chosen[:i] + chosen[i + 1:]
         stack = Stack(base, others)
-        sim = simulate_variants(data, [stack.variant()])
-        sse, errors = sim["sse"][0], _errors(data, {k: v[0] for k, v in sim["pred"].items()})
+        sse, errors = _baseline(data, stack)
         taken = {r["name"] for r in others}
         pool = [old["candidate"]] + [c for c in old.get("alternatives", []) if c.name not in taken]
         ranking = _search(data, stack, pool, settings, sse, errors)
@@ -667,12 +672,11 @@ def _exchange(data, base, chosen, ranking, settings, current_sse, current_errors
         if [e["name"] for e in trial[:-1]] == [e["name"] for e in chosen] or len(trial) <= len(chosen):
             continue                      # nothing was exchanged: the runner-up failed on its own already
         others = trial[:-1]
-        sim = simulate_variants(data, [Stack(base, others).variant()])
-        without = _errors(data, {k: v[0] for k, v in sim["pred"].items()})
-        last = _search(data, Stack(base, others), [trial[-1]["candidate"]], settings, sim["sse"][0], without)[0]
+        sse, without = _baseline(data, Stack(base, others))
+        last = _search(data, Stack(base, others), [trial[-1]["candidate"]], settings, sse, without)[0]
         if not last["significant"]:
             continue
-        _polish(data, base, others, last, settings, sim["sse"][0], without)
+        _polish(data, base, others, last, settings, sse, without)
         against = _score({"held_sse": last["held_sse"], "errors": last["errors"], "candidate": last["candidate"],
                           "magnitude": last["magnitude"]}, data, current_sse, current_errors, settings)
         if not against["significant"]:
@@ -683,17 +687,17 @@ def _exchange(data, base, chosen, ranking, settings, current_sse, current_errors
     return None
 
 
-def _fit_secondary(data, base, chosen, settings) -> None:
+def _fit_secondary(data, base, chosen, settings) -> bool:
     """Each accepted entry's secondary parameters (the ground's damping) on a grid, geometric between their
     bounds, with the model's own value in place of a grid value within half a step of it; the magnitude is
     refitted at each (beside the other accepted effects), and a value other than the model's is kept only
-    when held-out strides prefer it (paired t of at least `min_t`)."""
+    when held-out strides prefer it (paired t of at least `min_t`). Returns whether any was kept."""
+    held = False
     for i in range(len(chosen)):
         for p in chosen[i]["candidate"].secondary:
             r, others = chosen[i], chosen[:i] + chosen[i + 1:]
             stack = Stack(base, others)
-            sim = simulate_variants(data, [stack.variant()])
-            sse, errors = sim["sse"][0], _errors(data, {k: v[0] for k, v in sim["pred"].items()})
+            sse, errors = _baseline(data, stack)
             own = float(getattr(stack.variant().coefficients, p.coefficient))
             grid = np.geomspace(p.low, p.high, settings.secondary_grid)
             step = (p.high / p.low) ** (0.5 / max(settings.secondary_grid - 1, 1))   # half a grid step
@@ -707,6 +711,32 @@ def _fit_secondary(data, base, chosen, settings) -> None:
             _polish(data, base, others, best, settings, sse, errors)
             best.update({k: r[k] for k in ("location", "ties", "alternatives") if k in r})
             chosen[i] = best
+            held = True
+    return held
+
+
+def _prune(data, base, chosen, settings) -> list[dict]:
+    """Once a secondary parameter is fitted, an accepted effect may no longer be needed (a stiffer leg stood in
+    for the ground's damping): each is tried again beside the others refitted without it, and dropped when it
+    no longer passes its guards there. Returns the effects kept (refitted)."""
+    dropped = True
+    while dropped and len(chosen) > 1:
+        dropped = False
+        for i in range(len(chosen)):
+            rest = [dict(r) for r in chosen[:i] + chosen[i + 1:]]
+            last = rest.pop()
+            sse, errors = _baseline(data, Stack(base, rest))
+            refit = _search(data, Stack(base, rest), [last["candidate"]], settings, sse, errors)[0]
+            _polish(data, base, rest, refit, settings, sse, errors)
+            refit.update({k: last[k] for k in ("location", "ties", "alternatives") if k in last})
+            others = rest + [refit]
+            sse, errors = _baseline(data, Stack(base, others))
+            again = _search(data, Stack(base, others), [chosen[i]["candidate"]], settings, sse, errors)[0]
+            if not again["significant"]:
+                chosen = others
+                dropped = True
+                break
+    return chosen
 
 
 def _cumulative_errors(data, base, chosen, fold) -> None:
@@ -738,7 +768,8 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     left = locate(data, Stack(base, chosen).variant())[0] if chosen else []
     if any(loc.ratio >= settings.restart_threshold for loc in left):
         chosen = _restarts(data, base, settings, excited, chosen, log, fold)
-    _fit_secondary(data, base, chosen, settings)
+    if _fit_secondary(data, base, chosen, settings):
+        chosen = _prune(data, base, chosen, settings)
     current = Stack(base, chosen).variant()
     _cumulative_errors(data, base, chosen, fold)
     final_sim = simulate_variants(data, [base, current], keep_series=True)

@@ -33,7 +33,8 @@ SITE_LIBRARY = {   # site -> (term library, Coefficients field, context kind)
 THRESHOLDS = (0.0, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
 KNOT_QUANTILES = (0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95)   # where a hinge term's knot may sit, over the samples
 FOLDS = 5
-MIN_T = 1.5          # held-out improvement over strides, one-sided t
+MIN_T = 1.5          # held-out improvement over strides, one-sided t: a pre-screen (an effect only some strides
+#                      reach, a tether above a height, is weak over strides); the candidate then faces the guards
 
 
 @dataclass
