@@ -687,26 +687,51 @@ def _exchange(data, base, chosen, ranking, settings, current_sse, current_errors
     return None
 
 
+def _with_secondary(data, stack, r, p, settings, sse, errors) -> dict | None:
+    """`r`'s candidate with its secondary parameter `p` on a grid, geometric between its bounds, with the
+    model's own value in place of a grid value within half a step of it, the magnitude refitted at each (on
+    top of `stack`); the best value other than the model's when held-out strides prefer it (paired t of at
+    least `min_t`), else None."""
+    own = float(getattr(stack.variant().coefficients, p.coefficient))
+    grid = np.geomspace(p.low, p.high, settings.secondary_grid)
+    step = (p.high / p.low) ** (0.5 / max(settings.secondary_grid - 1, 1))   # half a grid step
+    values = [own] + [float(v) for v in grid if not own / step < v < own * step]
+    tried = {v: _search(data, stack, [r["candidate"].holding(p, v)], settings, sse, errors)[0] for v in values}
+    value = min(tried, key=lambda v: tried[v]["held_sse"].sum())
+    best = tried[value]
+    if value == own or not best["significant"] or _paired_t(tried[own]["held_sse"], best["held_sse"]) < settings.min_t:
+        return None
+    return best
+
+
+def _secondary_look_alikes(data, stack, ranking, settings, sse, errors) -> list[dict]:
+    """A round's look-alikes of its best (as `_choose` ties them) that have a secondary parameter compete with
+    it fitted: a compliant ground with its own damping against a softer leg. Returns the ranking, re-sorted."""
+    passed = [r for r in ranking if r["significant"]]
+    if not passed:
+        return ranking
+    top = max(passed, key=lambda r: r["reduction"])
+    out = []
+    for r in ranking:
+        alike = r is top or _paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t or \
+            r["reduction"] >= top["reduction"] * (1 - settings.tie_share)
+        for p in r["candidate"].secondary if r["significant"] and alike else ():
+            r = _with_secondary(data, stack, r, p, settings, sse, errors) or r
+        out.append(r)
+    return sorted(out, key=lambda r: -r["reduction"])
+
+
 def _fit_secondary(data, base, chosen, settings) -> bool:
-    """Each accepted entry's secondary parameters (the ground's damping) on a grid, geometric between their
-    bounds, with the model's own value in place of a grid value within half a step of it; the magnitude is
-    refitted at each (beside the other accepted effects), and a value other than the model's is kept only
-    when held-out strides prefer it (paired t of at least `min_t`). Returns whether any was kept."""
+    """Each accepted entry's secondary parameters (`_with_secondary`), beside the other accepted effects.
+    Returns whether any was kept."""
     held = False
     for i in range(len(chosen)):
         for p in chosen[i]["candidate"].secondary:
             r, others = chosen[i], chosen[:i] + chosen[i + 1:]
             stack = Stack(base, others)
             sse, errors = _baseline(data, stack)
-            own = float(getattr(stack.variant().coefficients, p.coefficient))
-            grid = np.geomspace(p.low, p.high, settings.secondary_grid)
-            step = (p.high / p.low) ** (0.5 / max(settings.secondary_grid - 1, 1))   # half a grid step
-            values = [own] + [float(v) for v in grid if not own / step < v < own * step]
-            tried = {v: _search(data, stack, [r["candidate"].holding(p, v)], settings, sse, errors)[0] for v in values}
-            value = min(tried, key=lambda v: tried[v]["held_sse"].sum())
-            best = tried[value]
-            if value == own or not best["significant"] or \
-                    _paired_t(tried[own]["held_sse"], best["held_sse"]) < settings.min_t:
+            best = _with_secondary(data, stack, r, p, settings, sse, errors)
+            if best is None:
                 continue
             _polish(data, base, others, best, settings, sse, errors)
             best.update({k: r[k] for k in ("location", "ties", "alternatives") if k in r})
@@ -806,6 +831,7 @@ def _rounds(data, base, settings, excited, chosen, current_sse, current_errors, 
                 cands.append(discovered_candidate(found))
         cands += _ringing_candidates(data, located, taken, log)
         ranking = _search(data, stack, cands, settings, current_sse, current_errors)
+        ranking = _secondary_look_alikes(data, stack, ranking, settings, current_sse, current_errors)
         log.setdefault("first_location", locations)
         log.setdefault("first_ranking", ranking)
         top, ties = _choose(ranking, settings)
