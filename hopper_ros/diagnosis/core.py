@@ -45,6 +45,7 @@ class Settings:
     sensor_alone: float = 0.5        # a sensor fault that leaves the next apex as it was must explain this share
     sensor_margin: float = 0.15      # a sensor effect must beat the best physics effect's reduction by this share
     discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
+    margin_residual: float = 0.5     # ... or leave at most this share of what that one leaves (paired t >= min_t)
     tie_t: float = 2.5               # an effect fitting held-out strides not worse by this t is a look-alike ...
     tie_share: float = 0.02          # ... and so is one whose reduction is within this share of the best's
     locate_threshold: float = 2.5    # residual over noise for a site to stand out
@@ -471,14 +472,15 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     fit is not worse than the accepted one's by a one-sided t of `tie_t` over strides is reported beside it
     as not separable."""
     passed = [r for r in ranking if r["significant"]]
-    best_physics = max((r["reduction"] for r in passed if r["candidate"].kind == "physics"), default=0.0)
-    best_library = max((r["reduction"] for r in passed if r["candidate"].kind != "discovered"), default=0.0)
+    best_physics = max((r for r in passed if r["candidate"].kind == "physics"), key=lambda r: r["reduction"], default=None)
+    best_library = max((r for r in passed if r["candidate"].kind != "discovered"), key=lambda r: r["reduction"],
+                       default=None)
     for r in passed:
         c = r["candidate"]
-        if c.kind == "sensor" and r["reduction"] < best_physics + settings.sensor_margin * r["reduction"]:
+        if c.kind == "sensor" and not _beats(r, best_physics, settings.sensor_margin, settings):
             r["significant"] = False
             r["rejected"].append("a physics effect explains the same residual about as well")
-        if c.kind == "discovered" and r["reduction"] < best_library + settings.discovery_margin * r["reduction"]:
+        if c.kind == "discovered" and not _beats(r, best_library, settings.discovery_margin, settings):
             r["significant"] = False
             r["rejected"].append("a library effect explains it about as well")
     ok = [r for r in ranking if r["significant"]]
@@ -488,6 +490,16 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     ties = [r for r in passed if r is not top and (_paired_t(r["held_sse"], top["held_sse"]) < settings.tie_t
                                                     or r["reduction"] >= top["reduction"] * (1 - settings.tie_share))]
     return top, ties
+
+
+def _beats(r: dict, rival: dict | None, margin: float, settings: Settings) -> bool:
+    """`r` beats the preferred kind's best `rival` by a margin: its reduction by `margin` of its own, or (near a
+    full reduction, where reductions differ little) it leaves at most `margin_residual` of what the rival
+    leaves on held-out strides, consistently over strides (paired t >= min_t)."""
+    if rival is None or r["reduction"] >= rival["reduction"] + margin * r["reduction"]:
+        return True
+    return bool(r["held_sse"].sum() <= settings.margin_residual * rival["held_sse"].sum()
+                and _paired_t(rival["held_sse"], r["held_sse"]) >= settings.min_t)
 
 
 def _paired_t(worse: np.ndarray, better: np.ndarray) -> float:

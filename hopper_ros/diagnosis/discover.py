@@ -3,15 +3,18 @@
 Per site (flight horizontal/vertical, stance along the leg and about the hip, the velocity jumps at
 touchdown and lift-off) the bias-corrected residual forces of `locate` are regressed on the site's
 term library (`physics.laws`: powers and signs of velocities, powers of the spring's compression,
-the torque, the time since touchdown, a hinge max(0, z - z_k) ...) by sequentially thresholded least
-squares (SINDy's STLSQ); the threshold, and a hinge's knot among quantiles of its variable, are chosen
-by cross-validation over strides (the sparsest model within one standard error of the best), and the
-model is kept only if it predicts held-out strides better than no term at all. The term set becomes a candidate effect whose coefficients are refitted (one scale)
+the torque, the time since touchdown, a hinge max(0, z - z_k) ...) by best-subset selection: every
+subset of at most three terms, and a hinge's knot among quantiles of its variable, judged by
+cross-validation over strides (the smallest subset within one standard error of the best; SINDy's
+thresholded least squares splits a coefficient between collinear terms and never tries a term that
+stands in for two correlated ones); the model is kept only if it predicts held-out strides better than
+no term at all. The term set becomes a candidate effect whose coefficients are refitted (one scale)
 and ranked on held-out strides exactly like a library effect.
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,8 +33,7 @@ SITE_LIBRARY = {   # site -> (term library, Coefficients field, context kind)
     "liftoff_along": (laws.JUMP_TERMS, "liftoff_along_terms", "jump"),
     "liftoff_across": (laws.JUMP_TERMS, "liftoff_across_terms", "jump"),
 }
-THRESHOLDS = (0.0, 0.02, 0.05, 0.1, 0.2, 0.35, 0.5)
-KNOT_QUANTILES = (0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95)   # where a hinge term's knot may sit, over the samples
+KNOT_QUANTILES = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95)   # where a hinge term's knot may sit, over the samples
 FOLDS = 5
 MIN_T = 1.5          # held-out improvement over strides, one-sided t: a pre-screen (an effect only some strides
 #                      reach, a tether above a height, is weak over strides); the candidate then faces the guards
@@ -116,81 +118,92 @@ def site_samples(site: str, sets, knot: float = 0.0) -> list[tuple[np.ndarray, n
     return out
 
 
-def stlsq(X, y, threshold, iterations=8):
-    """Sequentially thresholded least squares on standardised columns; threshold relative to the largest."""
-    scale = X.std(axis=0)
-    scale = np.where(scale > 1e-12, scale, np.maximum(np.abs(X).mean(axis=0), 1e-12))
-    Xs = X / scale
-    coef = np.linalg.lstsq(Xs, y, rcond=None)[0]
-    for _ in range(iterations):
-        big = np.abs(coef) >= threshold * np.max(np.abs(coef)) if np.any(coef) else np.zeros_like(coef, bool)
-        if not big.any():
-            return np.zeros_like(coef)
-        new = np.zeros_like(coef)
-        new[big] = np.linalg.lstsq(Xs[:, big], y, rcond=None)[0]
-        if np.array_equal(new != 0, coef != 0):
-            coef = new
-            break
-        coef = new
-    return coef / scale
+def _grams(per_stride):
+    """Per stride X'X, X'y and y'y: every subset's fit and held-out SSE follow from these."""
+    return (np.array([X.T @ X for X, _ in per_stride]), np.array([X.T @ y for X, y in per_stride]),
+            np.array([y @ y for _, y in per_stride]))
+
+
+def _solve(gram, rhs):
+    """Least squares from the normal equations, None where the columns are (nearly) collinear."""
+    scale = np.sqrt(np.diag(gram))
+    if np.any(scale <= 0):
+        return None
+    normed = gram / np.outer(scale, scale)
+    if np.linalg.cond(normed) > 1e8:
+        return None
+    return np.linalg.solve(normed, rhs / scale) / scale
 
 
 def _cross_validate(per_stride, max_terms: int):
-    """Held-out SSE per stride for each threshold (inf where a fold's model has too many terms), the
-    zero model's SSE, and the threshold picked: the sparsest within one standard error of the best."""
+    """Best-subset selection by cross-validation over strides: every subset of at most `max_terms` terms
+    (collinear ones skipped: a sign of a velocity that never changes sign in the phase is a constant) fitted
+    on the training folds, its SSE on each held-out stride; the subset picked is the smallest within one
+    standard error of the best (then the best of that size). Returns (held-out SSE per stride, the zero
+    model's, the subset) or None."""
     n = len(per_stride)
     fold = np.arange(n) % FOLDS
-    cv = []
-    for thr in THRESHOLDS:
-        sse = np.zeros(n)
-        for f in range(FOLDS):
-            train = [per_stride[i] for i in range(n) if fold[i] != f]
-            X = np.vstack([p[0] for p in train])
-            y = np.concatenate([p[1] for p in train])
-            coef = stlsq(X, y, thr)
-            if np.count_nonzero(coef) > max_terms:
-                sse[:] = np.inf
-                break
-            for i in np.flatnonzero(fold == f):
-                Xi, yi = per_stride[i]
-                sse[i] = np.sum((yi - Xi @ coef) ** 2)
-        cv.append(sse)
-    cv = np.array(cv)
-    zero = np.array([np.sum(p[1] ** 2) for p in per_stride])
-    totals = cv.sum(axis=1)
-    if not np.isfinite(totals).any():
+    gram, rhs, yy = _grams(per_stride)
+    total_gram, total_rhs = gram.sum(axis=0), rhs.sum(axis=0)
+    fold_gram = [gram[fold == f].sum(axis=0) for f in range(FOLDS)]
+    fold_rhs = [rhs[fold == f].sum(axis=0) for f in range(FOLDS)]
+    tried = []
+    for size in range(1, max_terms + 1):
+        for subset in itertools.combinations(range(gram.shape[1]), size):
+            ix = np.ix_(subset, subset)
+            held = np.empty(n)
+            for f in range(FOLDS):
+                coef = _solve(total_gram[ix] - fold_gram[f][ix], total_rhs[list(subset)] - fold_rhs[f][list(subset)])
+                if coef is None:
+                    break
+                rows = np.flatnonzero(fold == f)
+                held[rows] = (yy[rows] - 2 * rhs[rows][:, subset] @ coef
+                              + np.einsum("i,nij,j->n", coef, gram[rows][:, subset][:, :, subset], coef))
+            else:
+                tried.append((held.sum(), size, subset, held))
+    if not tried:
         return None
-    best = int(np.nanargmin(np.where(np.isfinite(totals), totals, np.nan)))
-    se = np.std(cv[best] - zero) * np.sqrt(n)
-    pick = max(k for k in range(len(THRESHOLDS)) if np.isfinite(totals[k]) and totals[k] <= totals[best] + se)
-    return cv[pick], zero, pick
+    best = min(tried, key=lambda trial: trial[0])
+    se = np.std(best[3] - yy) * np.sqrt(n)
+    near = [trial for trial in tried if trial[0] <= best[0] + se]
+    pick = min(near, key=lambda trial: (trial[1], trial[0]))
+    return pick[3], yy, pick[2]
 
 
 def discover_site(site: str, sets, max_terms: int = 3) -> Discovery | None:
+    """The term set (and hinge knot) of `site` that held-out strides prefer, or None."""
+    library, field, _ = SITE_LIBRARY[site]
+    hinge = hinge_of(field)
+    hinge_column = [k for k, *_ in library].index(hinge[0]) if hinge else -1
     trials = []
-    for knot in _knots(site, sets):
+
+    def trial(knot):
         per_stride = site_samples(site, sets, knot)
-        if len(per_stride) < 2 * FOLDS:
-            return None
-        found = _cross_validate(per_stride, max_terms)
+        found = _cross_validate(per_stride, max_terms) if len(per_stride) >= 2 * FOLDS else None
         if found is not None:
             trials.append((found[0].sum(), knot, per_stride, *found))
+
+    knots = _knots(site, sets)
+    for knot in knots:
+        trial(knot)
     if not trials:
         return None
-    _, knot, per_stride, held, zero, pick = min(trials, key=lambda trial: trial[0])
+    best = min(trials, key=lambda t: t[0])
+    if hinge_column in best[5]:        # the knot refined between the quantiles about the best
+        k = knots.index(best[1])
+        for knot in np.linspace(knots[max(k - 1, 0)], knots[min(k + 1, len(knots) - 1)], 9)[1:-1]:
+            trial(float(knot))
+    _, knot, per_stride, held, zero, subset = min(trials, key=lambda t: t[0])
     n = len(per_stride)
     d = zero - held
     t = float(d.mean() / (d.std(ddof=1) / np.sqrt(n))) if d.std(ddof=1) > 0 else 0.0
     explained = float(1.0 - held.sum() / zero.sum()) if zero.sum() > 0 else 0.0
     if t < MIN_T or explained <= 0:
         return None
-    X = np.vstack([p[0] for p in per_stride])
-    y = np.concatenate([p[1] for p in per_stride])
-    coef = stlsq(X, y, THRESHOLDS[pick])
-    if not np.any(coef):
-        return None
-    library, field, _ = SITE_LIBRARY[site]
-    hinge = hinge_of(field)
-    used = hinge is not None and coef[[k for k, *_ in library].index(hinge[0])] != 0
+    gram, rhs, _ = _grams(per_stride)
+    ix = np.ix_(subset, subset)
+    coef = np.zeros(gram.shape[1])
+    coef[list(subset)] = _solve(gram.sum(axis=0)[ix], rhs.sum(axis=0)[list(subset)])
+    used = hinge_column in subset
     return Discovery(site, field, tuple(float(c) for c in coef), tuple(k for k, *_ in library), explained, t,
                      knot if used else 0.0)
