@@ -143,3 +143,63 @@ def test_a_ringing_channel_is_modelled_as_what_the_sensor_sees(suite):
     entry = doc["verdict"][0]
     assert entry["kind"] == "discovered" and [t["unit"] for t in entry["terms"]] == ["m", "m"], entry
     assert "rings" in entry["words"] and result["after"]["E_p"] <= result["before"]["E_p"] * 1.01
+
+
+@pytest.fixture(scope="module")
+def residuals(tmp_path_factory):
+    """The located residuals of two recordings whose law no library entry has, under the model."""
+    from hopper_ros.diagnosis.core import base_variant, load_settings, prepare
+    from hopper_ros.diagnosis.locate import residual_sets
+    from hopper_ros.identification.recordings import load_recording
+    from hopper_ros.physics.params import load_model
+
+    folder = tmp_path_factory.mktemp("laws")
+    names = ("other_hip_torsion_spring", "other_bump_stop")
+    write_suite(folder, names)
+    params, effects = load_model("model.yaml")
+    settings = load_settings("diagnosis.yaml")
+    out = {}
+    for name in names:
+        data = prepare(load_recording(folder / f"{name}.csv"), params, settings.min_strides, settings.liftoff_window)
+        out[name] = (json.loads((folder / f"{name}.json").read_text()), residual_sets(data, base_variant(params, effects)))
+    return out
+
+
+def test_discovery_picks_the_one_term_that_stands_for_two(residuals):
+    """A torsional spring at the hip, tau = -kappa theta: theta = (theta - theta_td) + theta_td, so a constant and
+    the swing since touchdown fit it too, and in stance sign(theta') is a constant as well (the leg sweeps one
+    way). Best-subset selection over strides finds the single term, with the plant's stiffness."""
+    from hopper_ros.diagnosis.discover import discover_site
+
+    truth, sets = residuals["other_hip_torsion_spring"]
+    found = discover_site("stance_hip", sets)
+    terms = {key: coef for key, coef, _, _ in found.terms()}
+    assert set(terms) == {"theta"}, terms
+    kappa = truth["effects"][0]["magnitude"]
+    assert abs(-terms["theta"] - kappa) <= 0.3 * kappa, terms
+
+
+def test_a_stop_the_leg_reaches_is_a_hinge_at_its_compression(residuals):
+    """A bump stop engaging 25 mm into the stroke: the knot is chosen by held-out strides among the compressions
+    the recording reaches, near the plant's."""
+    from hopper_ros.diagnosis.discover import discover_site
+
+    truth, sets = residuals["other_bump_stop"]
+    found = discover_site("stance_along", sets)
+    terms = {key: coef for key, coef, _, _ in found.terms()}
+    assert "x>x_k" in terms and terms["x>x_k"] > 0, terms
+    engage = _effect(truth)["engage_compression"]
+    assert abs(found.knot - engage) <= 0.2 * engage, found.knot
+
+
+def test_a_mismatch_no_force_shows_is_located_by_trajectory(tmp_path):
+    """A toe that slips under large hip torques: the force residuals stay within the noise one stride at a time
+    and no law of the library or the term libraries fits, but the re-simulated strides miss the recording by
+    tens of noise levels. The tool must not say there is no mismatch: it locates where the strides first leave
+    the recording, in stance, and says that nothing it knows models it."""
+    write_suite(tmp_path, ["other_toe_slip"])
+    result = diagnose_file(tmp_path / "other_toe_slip.csv")
+    first = result["location"][0]
+    assert first.basis == "trajectory" and first.site in ("stance_hip", "stance_along"), first.words()
+    assert first.ratio >= Settings().locate_threshold and "compression" in first.window, first.words()
+    assert result["verdict"].startswith("missing: something no library effect"), result["verdict"]

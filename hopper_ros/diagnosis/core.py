@@ -25,10 +25,10 @@ from hopper_ros.physics.params import ModelParams
 
 from .data import LEAD_RESOLVED, PHASES, StrideData, prepare
 from .discover import Discovery, discover_site, hinge_of
-from .ringing import CHANNEL_SITE, Ringing, discover_ringing
 from .locate import SITES as LOCATE_SITES
-from .locate import Location, fit_locations, locate
-from .simulate import Variant, simulate_variants
+from .locate import Location, fit_locations, locate, trajectory_location
+from .ringing import CHANNEL_SITE, Ringing, discover_ringing
+from .simulate import CHANNELS, Variant, simulate_variants
 
 
 @dataclass
@@ -56,6 +56,7 @@ class Settings:
     polish: int = 3                  # passes of the joint refit of an accepted effect with the earlier ones
     restarts: int = 3                # first-round runners-up that start the rounds again ...
     restart_threshold: float = 5.0   # ... when the accepted set leaves a residual this far over the noise level
+    trajectory_threshold: float = 10.0   # nothing located by force: a re-simulated phase this many noise levels off
     secondary_grid: int = 5          # values of an accepted entry's secondary parameter tried (geometric)
 
 
@@ -813,6 +814,10 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     before = base_errors
     after = _errors(data, _held_out_variants(data, base, chosen, fold)) if chosen else before
     first_location = _with_chosen_sites(log["first_location"], chosen, settings)
+    if not chosen and all(loc.ratio < settings.locate_threshold for loc in first_location):
+        found = trajectory_location(base_sim["by_phase"][0], base_sim["counts"], settings.locate_threshold,
+                                    settings.trajectory_threshold, PHASES, CHANNELS)
+        first_location = [found] + first_location if found else first_location
     residual_location = locate(data, current)[0] if chosen else first_location
     return {"data": data, "rounds": rounds, "chosen": chosen, "before_phase": _rms_table(final_sim, 0, data),
             "after_phase": _rms_table(final_sim, 1, data), "before": before, "after": after,

@@ -278,7 +278,8 @@ class Location:
     size: float           # its mean over strides, bias corrected, in `unit`
     unit: str
     strides: int
-    basis: str = "force"  # force: residual forces and jumps against noise; fit: a change there, fitted and held out
+    basis: str = "force"  # force: residual forces and jumps against noise; fit: a change there, fitted and held out;
+    #                       trajectory: where the re-simulated strides first leave the recording
     t: float = 0.0        # (fit) one-sided t over strides of the held-out residual's fall
 
     @property
@@ -290,6 +291,9 @@ class Location:
         return SITE_WORDS[self.site][1]
 
     def words(self) -> str:
+        if self.basis == "trajectory":
+            return (f"{self.phase}, {self.direction} (by trajectory: {self.window} leaves the recording, "
+                    f"{self.size:.0f} x the noise level)")
         if self.basis == "fit":
             return (f"{self.phase}, {self.direction} (by fit: {self.window} removes {self.size:.0f} % of the "
                     f"held-out residual, t {self.t:.1f})")
@@ -310,6 +314,35 @@ def fit_locations(results: list[dict], sites, threshold: float, min_t: float) ->
                 best[site] = r
     return [Location(site, r["t"] * threshold / min_t, r["candidate"].name, 100.0 * r["reduction"], "%",
                      len(r["held_sse"]), basis="fit", t=r["t"]) for site, r in best.items()]
+
+
+# (phase, channel) of the re-simulated strides -> the site it belongs to, and the channel in words
+TRAJECTORY_SITES = {("descent", "y"): "flight_horizontal", ("descent", "z"): "flight_vertical",
+                    ("compression", "y"): "stance_along", ("compression", "z"): "stance_along",
+                    ("compression", "theta"): "stance_hip", ("decompression", "y"): "stance_along",
+                    ("decompression", "z"): "stance_along", ("decompression", "theta"): "stance_hip",
+                    ("liftoff", "y"): "liftoff_along", ("liftoff", "z"): "liftoff_along",
+                    ("ascent", "y"): "flight_horizontal", ("ascent", "z"): "flight_vertical"}
+CHANNEL_WORDS = {"y": "the forward position", "z": "the height", "theta": "the leg angle"}
+
+
+def trajectory_location(by_phase: np.ndarray, counts: np.ndarray, threshold: float, scale: float,
+                        phases, channels) -> Location | None:
+    """Locate by trajectory: the first phase of the stride where a re-simulated channel misses the recording
+    by `scale` noise levels RMS or more (per phase and channel over strides, `by_phase` (strides, phases,
+    channels) of normalised squared residuals, `counts` their samples). Errors made early carry into every
+    later phase, so the first one is where the model leaves the robot. Used where no force residual stands
+    above the noise one stride at a time (a toe that slips under large hip torques). The ratio is the RMS
+    scaled so that `scale` is `threshold`."""
+    rms = np.sqrt(by_phase.sum(axis=0) / np.maximum(counts.sum(axis=0), 1))
+    for i, phase in enumerate(phases):
+        pairs = [(rms[i, j], ch) for j, ch in enumerate(channels) if (phase, ch) in TRAJECTORY_SITES]
+        size, channel = max(pairs, default=(0.0, ""))
+        if size >= scale:
+            return Location(TRAJECTORY_SITES[(phase, channel)], threshold * size / scale,
+                            f"{CHANNEL_WORDS[channel]} in {phase}", float(size), "x noise (RMS)",
+                            int(by_phase.shape[0]), basis="trajectory")
+    return None
 
 
 def locate(data: StrideData, variant: Variant) -> tuple[list[Location], tuple]:
