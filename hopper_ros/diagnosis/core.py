@@ -45,7 +45,7 @@ class Settings:
     sensor_alone: float = 0.5        # a sensor fault that leaves the next apex as it was must explain this share
     sensor_margin: float = 0.15      # a sensor effect must beat the best physics effect's reduction by this share
     discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
-    margin_residual: float = 0.5     # ... or leave at most this share of what that one leaves (paired t >= min_t)
+    margin_residual: float = 0.5     # ... or (a sensor) leave at most this share of what it leaves (paired t >= min_t)
     tie_t: float = 2.5               # an effect fitting held-out strides not worse by this t is a look-alike ...
     tie_share: float = 0.02          # ... and so is one whose reduction is within this share of the best's
     locate_threshold: float = 2.5    # residual over noise for a site to stand out
@@ -481,7 +481,8 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
         if c.kind == "sensor" and not _beats(r, best_physics, settings.sensor_margin, settings):
             r["significant"] = False
             r["rejected"].append("a physics effect explains the same residual about as well")
-        if c.kind == "discovered" and not _beats(r, best_library, settings.discovery_margin, settings):
+        if c.kind == "discovered" and best_library is not None and \
+                r["reduction"] < best_library["reduction"] + settings.discovery_margin * r["reduction"]:
             r["significant"] = False
             r["rejected"].append("a library effect explains it about as well")
     ok = [r for r in ranking if r["significant"]]
@@ -494,9 +495,11 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
 
 
 def _beats(r: dict, rival: dict | None, margin: float, settings: Settings) -> bool:
-    """`r` beats the preferred kind's best `rival` by a margin: its reduction by `margin` of its own, or (near a
-    full reduction, where reductions differ little) it leaves at most `margin_residual` of what the rival
-    leaves on held-out strides, consistently over strides (paired t >= min_t)."""
+    """A sensor fault `r` beats the best physics effect `rival` by a margin: its reduction by `margin` of its own,
+    or (near a full reduction, where reductions differ little) it leaves at most `margin_residual` of what the
+    rival leaves on held-out strides, consistently over strides (paired t >= min_t). A discovered term set
+    against a library entry has only the first: the same law written as terms (a constant force where the
+    speed never changes sign) can fit closer than the entry's grid, and the entry's name is the answer."""
     if rival is None or r["reduction"] >= rival["reduction"] + margin * r["reduction"]:
         return True
     return bool(r["held_sse"].sum() <= settings.margin_residual * rival["held_sse"].sum()
