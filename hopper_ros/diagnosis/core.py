@@ -46,6 +46,7 @@ class Settings:
     sensor_margin: float = 0.15      # a sensor effect must beat the best physics effect's reduction by this share
     discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
     margin_residual: float = 0.5     # ... or (a sensor) leave at most this share of what it leaves (paired t >= min_t)
+    near_full: float = 0.95          # ... when it removes at least this share of the held-out residual
     tie_t: float = 2.5               # an effect fitting held-out strides not worse by this t is a look-alike ...
     tie_share: float = 0.02          # ... and so is one whose reduction is within this share of the best's
     locate_threshold: float = 2.5    # residual over noise for a site to stand out
@@ -496,13 +497,14 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
 
 def _beats(r: dict, rival: dict | None, margin: float, settings: Settings) -> bool:
     """A sensor fault `r` beats the best physics effect `rival` by a margin: its reduction by `margin` of its own,
-    or (near a full reduction, where reductions differ little) it leaves at most `margin_residual` of what the
-    rival leaves on held-out strides, consistently over strides (paired t >= min_t). A discovered term set
+    or (near a full reduction, `near_full`, where reductions differ little) it leaves at most `margin_residual` of
+    what the rival leaves on held-out strides, consistently over strides (paired t >= min_t). A discovered term set
     against a library entry has only the first: the same law written as terms (a constant force where the
     speed never changes sign) can fit closer than the entry's grid, and the entry's name is the answer."""
     if rival is None or r["reduction"] >= rival["reduction"] + margin * r["reduction"]:
         return True
-    return bool(r["held_sse"].sum() <= settings.margin_residual * rival["held_sse"].sum()
+    return bool(r["reduction"] >= settings.near_full
+                and r["held_sse"].sum() <= settings.margin_residual * rival["held_sse"].sum()
                 and _paired_t(rival["held_sse"], r["held_sse"]) >= settings.min_t)
 
 
