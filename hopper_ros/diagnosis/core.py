@@ -739,10 +739,8 @@ def _secondary_look_alikes(data, stack, ranking, settings, sse, errors) -> list[
     return sorted(out, key=lambda r: -r["reduction"])
 
 
-def _fit_secondary(data, base, chosen, settings) -> bool:
-    """Each accepted entry's secondary parameters (`_with_secondary`), beside the other accepted effects.
-    Returns whether any was kept."""
-    held = False
+def _fit_secondary(data, base, chosen, settings) -> None:
+    """Each accepted entry's secondary parameters (`_with_secondary`), beside the other accepted effects."""
     for i in range(len(chosen)):
         for p in chosen[i]["candidate"].secondary:
             r, others = chosen[i], chosen[:i] + chosen[i + 1:]
@@ -754,32 +752,6 @@ def _fit_secondary(data, base, chosen, settings) -> bool:
             _polish(data, base, others, best, settings, sse, errors)
             best.update({k: r[k] for k in ("location", "ties", "alternatives") if k in r})
             chosen[i] = best
-            held = True
-    return held
-
-
-def _prune(data, base, chosen, settings) -> list[dict]:
-    """Once a secondary parameter is fitted, an accepted effect may no longer be needed (a stiffer leg stood in
-    for the ground's damping): each is tried again beside the others refitted without it, and dropped when it
-    no longer passes its guards there. Returns the effects kept (refitted)."""
-    dropped = True
-    while dropped and len(chosen) > 1:
-        dropped = False
-        for i in range(len(chosen)):
-            rest = [dict(r) for r in chosen[:i] + chosen[i + 1:]]
-            last = rest.pop()
-            sse, errors = _baseline(data, Stack(base, rest))
-            refit = _search(data, Stack(base, rest), [last["candidate"]], settings, sse, errors)[0]
-            _polish(data, base, rest, refit, settings, sse, errors)
-            refit.update({k: last[k] for k in ("location", "ties", "alternatives") if k in last})
-            others = rest + [refit]
-            sse, errors = _baseline(data, Stack(base, others))
-            again = _search(data, Stack(base, others), [chosen[i]["candidate"]], settings, sse, errors)[0]
-            if not again["significant"]:
-                chosen = others
-                dropped = True
-                break
-    return chosen
 
 
 def _cumulative_errors(data, base, chosen, fold) -> None:
@@ -811,8 +783,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     left = locate(data, Stack(base, chosen).variant())[0] if chosen else []
     if any(loc.ratio >= settings.restart_threshold for loc in left):
         chosen = _restarts(data, base, settings, excited, chosen, log, fold)
-    if _fit_secondary(data, base, chosen, settings):
-        chosen = _prune(data, base, chosen, settings)
+    _fit_secondary(data, base, chosen, settings)
     current = Stack(base, chosen).variant()
     _cumulative_errors(data, base, chosen, fold)
     final_sim = simulate_variants(data, [base, current], keep_series=True)
