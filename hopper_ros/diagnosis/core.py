@@ -415,6 +415,13 @@ def _quadratic_at(grid: np.ndarray, values: np.ndarray, x: float) -> np.ndarray:
     return out
 
 
+APEX_ERRORS = ("E_p", "E_v", "E_t")
+
+
+def _apex_sum(errors: dict) -> float:
+    return sum(errors[k] for k in APEX_ERRORS)
+
+
 def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
     """Trajectory and next-apex criteria on held-out strides; a sensor's magnitude must be a real sensor's."""
     why = []
@@ -427,8 +434,7 @@ def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
     if r["delta_bic"] >= 0:
         why.append("information criterion against it")
     e, b = r["errors"], base_errors
-    keys = ("E_p", "E_v", "E_t")
-    worse = [k for k in keys if not e[k] <= b[k] * (1 + settings.apex_tolerance) + 1e-6]
+    worse = [k for k in APEX_ERRORS if not e[k] <= b[k] * (1 + settings.apex_tolerance) + 1e-6]
     if worse:
         why.append("held-out " + ", ".join(worse) + " worse")
     # a sensor fault changes what is measured, not the motion: the next apex it predicts is the same (a delay)
@@ -437,7 +443,7 @@ def _guards(r: dict, base_errors: dict, settings: Settings) -> None:
     # a discovered ringing need not: its discovery already showed an oscillation the smooth residual cannot make)
     c = r["candidate"]
     measured = c.kind == "sensor" or getattr(c.discovery, "measurement", False)
-    better = sum(e[k] for k in keys) <= sum(b[k] for k in keys) * (1 - settings.apex_improvement)
+    better = _apex_sum(e) <= _apex_sum(b) * (1 - settings.apex_improvement)
     if not measured and not better:
         why.append("the next apex is not predicted better")
     elif c.kind == "sensor" and not better and r.get("total_reduction", 1.0) < settings.sensor_alone:
@@ -781,8 +787,8 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     # a refit beside later effects may move a sensor fault to where no real sensor has one: then it is not one
     chosen = [r for r in chosen if r["candidate"].kind != "sensor" or _plausible(r)]
     left = locate(data, Stack(base, chosen).variant())[0] if chosen else []
-    if any(loc.ratio >= settings.restart_threshold for loc in left):
-        chosen = _restarts(data, base, settings, excited, chosen, log, fold)
+    if any(loc.ratio >= settings.restart_threshold for loc in left) or len(chosen) >= settings.max_effects:
+        chosen = _restarts(data, base, settings, excited, chosen, log, fold, base_errors)
     _fit_secondary(data, base, chosen, settings)
     current = Stack(base, chosen).variant()
     _cumulative_errors(data, base, chosen, fold)
@@ -847,17 +853,20 @@ def _rounds(data, base, settings, excited, chosen, current_sse, current_errors, 
     return chosen, current_sse, current_errors
 
 
-def _restarts(data, base, settings, excited, chosen, log, fold) -> list[dict]:
-    """When the accepted set leaves a residual clearly above the noise (`restart_threshold`), its first effect may stand in for a pair it
-    is not part of (a gain fits a toe mass and a delay together better than either alone): the first round's
-    next-best candidates, those that failed only an apex guard alone as well (their partner is missing), each
-    start the rounds again. A set found so replaces the accepted one when it holds two effects or more, each of
-    which passed its guards beside the others, and beats the accepted set as an added effect would beat it: the
-    held-out trajectory SSE lower by `min_reduction` with a paired t of at least `min_t`, no held-out E_p, E_v,
-    E_t worse by more than `apex_tolerance`."""
+def _restarts(data, base, settings, excited, chosen, log, fold, base_errors) -> list[dict]:
+    """When the accepted set leaves a residual clearly above the noise (`restart_threshold`) or fills every round
+    (`max_effects`), its first effect may stand in for a pair it is not part of (a gain fits a toe mass and a
+    delay together better than either alone; a torque offset stands for a theta encoder's offset beside a stiffer
+    leg, and two more effects patch what it leaves): the first round's next-best candidates (a sensor fault among
+    them if its magnitude is a real sensor's), those that failed only an apex guard alone as well (their partner
+    is missing), each start the rounds again. A set found so replaces the accepted one when it holds two effects
+    or more, each of which passed its guards beside the others, and beats the accepted set as a whole
+    explanation: the held-out trajectory SSE lower by `min_reduction` with a paired t of at least `min_t`, the sum
+    of the held-out E_p, E_v, E_t not worse by more than `apex_tolerance`, and none of them worse than the model's
+    own (two explanations trade a little E_t for E_p; each compared alone, the guard would keep the wrong one)."""
     first = chosen[0]["name"]
     pool = [r for r in log["first_ranking"] if r["name"] != first and r["reduction"] >= settings.min_reduction
-            and r["t"] >= settings.min_t and r["candidate"].kind != "sensor"][:settings.restarts]
+            and r["t"] >= settings.min_t and (r["candidate"].kind != "sensor" or _plausible(r))][:settings.restarts]
     best_sse, best_pred = _held_out(data, base, chosen, fold)
     best, best_errors = chosen, _errors(data, best_pred)
     for r in pool:
@@ -871,7 +880,9 @@ def _restarts(data, base, settings, excited, chosen, log, fold) -> list[dict]:
         sse, pred = _held_out(data, base, trial, fold)
         errors = _errors(data, pred)
         if (1.0 - sse.sum() / best_sse.sum() >= settings.min_reduction and _paired_t(best_sse, sse) >= settings.min_t
-                and all(errors[k] <= best_errors[k] * (1 + settings.apex_tolerance) for k in errors)):
+                and _apex_sum(errors) <= _apex_sum(best_errors) * (1 + settings.apex_tolerance)
+                and all(errors[k] <= base_errors[k] * (1 + settings.apex_tolerance) for k in APEX_ERRORS)
+                and errors["fallen"] <= best_errors["fallen"]):
             best, best_sse, best_errors = trial, sse, errors
     return best
 
