@@ -19,7 +19,7 @@ from independent_plant.suite import write_suite  # noqa: E402
 
 SUBSET = ("clean_1", "flight_air_drag", "actuator_saturation", "leg_slide_coulomb", "leg_rest_length", "other_flight_lift",
           "other_ground_higher", "other_tether", "other_boom_bending", "sensor_z_delay", "pair_drag_gain",
-          "pair_toemass_delay", "pair_stiffness_thetaoffset")
+          "pair_toemass_delay", "pair_stiffness_thetaoffset", "other_hip_torsion_spring")
 
 
 @pytest.fixture(scope="module")
@@ -117,6 +117,21 @@ def test_restart_from_a_sensor_fault_when_the_rounds_fill_up(suite):
     assert greedy["name"] not in {_expected(e)[0] for e in truth["effects"]}, greedy["name"]
     assert len(s["hits"]) == 2 and not s["false_positives"], result["verdict"]
     assert [r["candidate"].kind for r in result["chosen"]].count("sensor") == 1, result["verdict"]
+
+
+def test_terms_that_fit_better_than_the_library_replace_its_look_alike_and_patch(suite):
+    """A torsional spring at the hip: the first round names a torque offset (the discovered term fits better, but
+    a discovered set must beat the library by a margin to take its name) and a theta scale patches what the offset
+    leaves. The discovered term alone fits the held-out strides better than that pair, so the rounds restarted
+    from it replace both: the plant's own law, with its stiffness, and nothing else."""
+    truth, result, s, _ = suite["other_hip_torsion_spring"]
+    greedy = max((r for r in result["rounds"][0] if r["significant"]), key=lambda r: r["reduction"])
+    assert greedy["candidate"].kind != "discovered", greedy["name"]
+    assert [r["candidate"].kind for r in result["chosen"]] == ["discovered"], result["verdict"]
+    entry = result["chosen"][0]
+    terms = {key: coef * entry["value"] for key, coef, _, _ in entry["candidate"].discovery.terms()}
+    kappa = truth["effects"][0]["magnitude"]
+    assert set(terms) == {"theta"} and abs(-terms["theta"] - kappa) <= 0.2 * kappa, terms
 
 
 def _effect(truth):

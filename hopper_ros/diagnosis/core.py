@@ -486,11 +486,11 @@ def _choose(ranking: list[dict], settings: Settings) -> tuple[dict | None, list[
     for r in passed:
         c = r["candidate"]
         if c.kind == "sensor" and not _beats(r, best_physics, settings.sensor_margin, settings):
-            r["significant"] = False
+            r["significant"], r["margin_only"] = False, True
             r["rejected"].append("a physics effect explains the same residual about as well")
         if c.kind == "discovered" and best_library is not None and \
                 r["reduction"] < best_library["reduction"] + settings.discovery_margin * r["reduction"]:
-            r["significant"] = False
+            r["significant"], r["margin_only"] = False, True
             r["rejected"].append("a library effect explains it about as well")
     ok = [r for r in ranking if r["significant"]]
     if not ok:
@@ -787,7 +787,8 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     # a refit beside later effects may move a sensor fault to where no real sensor has one: then it is not one
     chosen = [r for r in chosen if r["candidate"].kind != "sensor" or _plausible(r)]
     left = locate(data, Stack(base, chosen).variant())[0] if chosen else []
-    if any(loc.ratio >= settings.restart_threshold for loc in left) or len(chosen) >= settings.max_effects:
+    if (any(loc.ratio >= settings.restart_threshold for loc in left) or len(chosen) >= settings.max_effects
+            or (len(chosen) > 1 and _lost_on_a_margin(log["first_ranking"]))):
         chosen = _restarts(data, base, settings, excited, chosen, log, fold, base_errors)
     _fit_secondary(data, base, chosen, settings)
     current = Stack(base, chosen).variant()
@@ -854,19 +855,25 @@ def _rounds(data, base, settings, excited, chosen, current_sse, current_errors, 
 
 
 def _restarts(data, base, settings, excited, chosen, log, fold, base_errors) -> list[dict]:
-    """When the accepted set leaves a residual clearly above the noise (`restart_threshold`) or fills every round
-    (`max_effects`), its first effect may stand in for a pair it is not part of (a gain fits a toe mass and a
+    """When the accepted set leaves a residual clearly above the noise (`restart_threshold`), fills every round
+    (`max_effects`), or holds two or more where the first won on a naming margin against a candidate that fitted
+    better (`_lost_on_a_margin`), its first effect may stand in for a pair it is not part of (a gain fits a toe mass and a
     delay together better than either alone; a torque offset stands for a theta encoder's offset beside a stiffer
     leg, and two more effects patch what it leaves): the first round's next-best candidates (a sensor fault among
     them if its magnitude is a real sensor's), those that failed only an apex guard alone as well (their partner
-    is missing), each start the rounds again. A set found so replaces the accepted one when it holds two effects
-    or more, each of which passed its guards beside the others, and beats the accepted set as a whole
-    explanation: the held-out trajectory SSE lower by `min_reduction` with a paired t of at least `min_t`, the sum
-    of the held-out E_p, E_v, E_t not worse by more than `apex_tolerance`, and none of them worse than the model's
-    own (two explanations trade a little E_t for E_p; each compared alone, the guard would keep the wrong one)."""
+    is missing), each start the rounds again, the candidates that lost on a margin first. A set found so replaces
+    the accepted one when it holds two effects or more (or, started from a candidate that lost on a margin, fewer
+    than the accepted set: the margin gives a library entry its name where it does the job alone, not where it
+    needs another effect to patch it), each of which passed its guards beside the others, and
+    beats the accepted set as a whole explanation: the held-out trajectory SSE lower by `min_reduction` with a
+    paired t of at least `min_t`, the sum of the held-out E_p, E_v, E_t not worse by more than `apex_tolerance`,
+    and none of them worse than the model's own (two explanations trade a little E_t for E_p; each compared
+    alone, the guard would keep the wrong one)."""
     first = chosen[0]["name"]
-    pool = [r for r in log["first_ranking"] if r["name"] != first and r["reduction"] >= settings.min_reduction
-            and r["t"] >= settings.min_t and (r["candidate"].kind != "sensor" or _plausible(r))][:settings.restarts]
+    pool = _lost_on_a_margin(log["first_ranking"]) if len(chosen) > 1 else []
+    pool += [r for r in log["first_ranking"] if r["name"] != first and not r.get("margin_only")
+             and r["reduction"] >= settings.min_reduction and r["t"] >= settings.min_t
+             and (r["candidate"].kind != "sensor" or _plausible(r))][:settings.restarts]
     best_sse, best_pred = _held_out(data, base, chosen, fold)
     best, best_errors = chosen, _errors(data, best_pred)
     for r in pool:
@@ -875,7 +882,8 @@ def _restarts(data, base, settings, excited, chosen, log, fold, base_errors) -> 
         trial, _, _ = _rounds(data, base, settings, excited, [start], r["held_sse"], r["errors"],
                               {"rounds": [], "discoveries": []})
         trial = [e for e in trial if e["candidate"].kind != "sensor" or _plausible(e)]
-        if len(trial) < 2:
+        fewest, most = (1, len(chosen) - 1) if r.get("margin_only") else (2, settings.max_effects)
+        if not fewest <= len(trial) <= most:
             continue
         sse, pred = _held_out(data, base, trial, fold)
         errors = _errors(data, pred)
@@ -885,6 +893,14 @@ def _restarts(data, base, settings, excited, chosen, log, fold, base_errors) -> 
                 and errors["fallen"] <= best_errors["fallen"]):
             best, best_sse, best_errors = trial, sse, errors
     return best
+
+
+def _lost_on_a_margin(ranking: list[dict]) -> list[dict]:
+    """First-round candidates that passed every guard and fitted better than the round's choice but lost to it on
+    a naming margin (a sensor fault against physics, discovered terms against the library): the choice may need
+    more effects to fit what one of them fits alone (a torque offset and a theta scale for a torsion spring)."""
+    chosen = max((r["reduction"] for r in ranking if r["significant"]), default=math.inf)
+    return [r for r in ranking if r.get("margin_only") and r["reduction"] > chosen]
 
 
 def _with_chosen_sites(locations: list[Location], chosen: list[dict], settings: Settings) -> list[Location]:
