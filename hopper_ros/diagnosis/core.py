@@ -857,15 +857,15 @@ def _rounds(data, base, settings, excited, chosen, current_sse, current_errors, 
 def _restarts(data, base, settings, excited, chosen, log, fold, base_errors) -> list[dict]:
     """When the accepted set leaves a residual clearly above the noise (`restart_threshold`), fills every round
     (`max_effects`), or holds two or more where the first won on a naming margin against a candidate that fitted
-    better (`_lost_on_a_margin`), its first effect may stand in for a pair it is not part of (a gain fits a toe mass and a
-    delay together better than either alone; a torque offset stands for a theta encoder's offset beside a stiffer
-    leg, and two more effects patch what it leaves): the first round's next-best candidates (a sensor fault among
-    them if its magnitude is a real sensor's), those that failed only an apex guard alone as well (their partner
-    is missing), each start the rounds again, the candidates that lost on a margin first. A set found so replaces
-    the accepted one when it holds two effects or more (or, started from a candidate that lost on a margin, fewer
-    than the accepted set: the margin gives a library entry its name where it does the job alone, not where it
-    needs another effect to patch it), each of which passed its guards beside the others, and
-    beats the accepted set as a whole explanation: the held-out trajectory SSE lower by `min_reduction` with a
+    better (`_lost_on_a_margin`), its first effect may stand in for a pair it is not part of (a gain fits a toe
+    mass and a delay together better than either alone; a torque offset stands for a theta encoder's offset
+    beside a stiffer leg, and two more effects patch what it leaves): the first round's next-best candidates (a
+    sensor fault among them if its magnitude is a real sensor's), those that failed only an apex guard alone as
+    well (their partner is missing), each start the rounds again, the candidates that lost on a margin first. A
+    set found so replaces the accepted one when it holds two effects or more (or, started from a candidate that
+    lost on a margin, fewer than the accepted set: the margin gives a library entry its name where it does the
+    job alone, not where it needs another effect to patch it), each of which passed its guards beside the
+    others, and beats the accepted set as a whole explanation: the held-out trajectory SSE lower by `min_reduction` with a
     paired t of at least `min_t`, the sum of the held-out E_p, E_v, E_t not worse by more than `apex_tolerance`,
     and none of them worse than the model's own (two explanations trade a little E_t for E_p; each compared
     alone, the guard would keep the wrong one)."""
