@@ -42,6 +42,8 @@ LIBRARY_MATCH = {
     "hip_friction_coulomb": ("hip_dry_friction", lambda m: m),
     "liftoff_toe_mass": ("liftoff_collision", lambda m: m),
     "ground_higher": ("ground_height", lambda m: m),
+    # the plant's kinetic friction (its static one is a little higher; the library has one mu)
+    "toe_slip": ("toe_slip", lambda m: m),
     "sensor_delay_z": ("z_delay", lambda m: m), "sensor_delay_y": ("y_delay", lambda m: m),
     "sensor_delay_theta": ("theta_delay", lambda m: m),
     "sensor_scale_z": ("z_scale", lambda m: m), "sensor_scale_y": ("y_scale", lambda m: m),

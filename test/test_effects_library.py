@@ -81,3 +81,48 @@ def test_inverse_parameters_round_trip():
     e = effects.get("torque_saturation")
     assert e.physical(e.search_value(4.0)) == pytest.approx(4.0)
     assert math.isinf(e.physical(0.0))
+
+
+def test_toe_slip_agrees_with_the_independent_plant():
+    """The toe slip (a massless toe on Coulomb friction, the leg damper setting its speed) was derived here and in
+    test/independent_plant/ apart; with one mu for sticking and sliding the next apexes agree, and the slip moves
+    them (early in stance the hip torque tilts the ground force out of the friction cone)."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from independent_plant import effects as fx
+    from independent_plant.plant import Plant
+    from independent_plant.suite import REFERENCE_STRIDES, nominal_model, one_stride
+
+    strides = np.array(REFERENCE_STRIDES)
+    for mu in (0.45, 0.3):
+        ours = _lanes(laws.Coefficients.from_model(PARAMS, ground_friction=mu), strides)
+        plain = _lanes(laws.Coefficients.from_model(PARAMS), strides)
+        theirs = np.array([one_stride(Plant(nominal_model(), [fx.ToeSlip(mu, mu_s=mu)]), *s)[:2] for s in strides])
+        for ours_k, plain_k, theirs_k in ((ours.next_apex_height, plain.next_apex_height, theirs[:, 0]),
+                                          (ours.next_forward_speed, plain.next_forward_speed, theirs[:, 1])):
+            effect = np.abs(ours_k - plain_k)
+            assert np.max(effect) > 0.003
+            assert np.all(np.abs(ours_k - theirs_k) < 0.1 * np.max(effect)), (ours_k, theirs_k, plain_k)
+
+
+def test_toe_slip_in_the_simulated_robots_plant():
+    """The simulated robot's plant integrates the same law: its toe slides in stance, and its next apex is the
+    lanes' one."""
+    from hopper_ros.sim.config import load_sim_config
+    from hopper_ros.sim.plant import Plant
+
+    config = load_sim_config().with_effects(toe_slip={"mu": 0.3})
+    plant = Plant(config, leg_inertia=1e-3, leg_friction=0.0)
+    z, v, th, tau, tf = STRIDES[0]
+    plant.throw(z, v, th)
+    toe = []
+    while not any(e.kind == "apex" for e in plant.events[1:]) and plant.t < 1.0:
+        plant.advance(1e-3, lambda t: laws.ramp_torque(t - plant.touchdown_time, tau, tf) if plant.in_contact else 0.0)
+        toe.append(plant.toe_position - plant.toe_y)     # the slide from where it touched down
+    slide = np.array(toe)[np.isfinite(toe)]
+    assert slide.size and np.max(np.abs(slide)) > 5e-4
+    apex = next(e for e in plant.events[1:] if e.kind == "apex")
+    lane = _lanes(plant.coefficients, STRIDES[:1])
+    assert apex.z == pytest.approx(lane.next_apex_height[0], abs=2e-4)
+    assert apex.ydot == pytest.approx(lane.next_forward_speed[0], abs=2e-3)

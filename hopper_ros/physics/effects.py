@@ -162,6 +162,12 @@ LIBRARY: tuple[Effect, ...] = (
        Parameter("h_g", "m", -0.02, 0.02, "ground_height"),
        "touchdown at z = h_g + rho_0 cos(theta)", "the ground is higher than the model has it (or the leg longer at "
        "touchdown)", HEIGHTS),
+    _e("toe_slip", "ground", "stance_leg", "horizontal",
+       Parameter("mu", "", 0.5, 10.0, "ground_friction", inverse=True),
+       "the toe slides where |G_y| > mu G_z (G the leg's force on the ground; massless toe, the leg damper sets "
+       "its speed)", "the toe slips on the ground: Coulomb friction between toe and ground (a slide where the "
+       "leg's force leaves the friction cone, early in stance while the hip torque is large)",
+       "a force plate (the ratio of horizontal to vertical force caps at mu), or a camera on the toe"),
     # ---- the leg in stance (2.9)
     _e("leg_stiffness", "leg", "stance_leg", "along",
        Parameter("k", "N/m", 0.8, 1.2, "stiffness", relative=True),

@@ -7,7 +7,8 @@ located inside the step by linear interpolation of the guard and the step is spl
 Identification with effects and the mismatch tool use it; the simulated robot's plant and the exact
 model integrate the same laws their own way.
 
-State per lane: y, z, y', z', toe depth (compliant ground), applied torque (first-order actuator lag).
+State per lane: y, z, y', z', toe depth (compliant ground), applied torque (first-order actuator lag),
+the toe's forward position (it slides on a ground of finite friction).
 Outputs y, z, theta, y', z' every `sample` seconds of the lane's own clock from the apex, the next apex.
 """
 
@@ -70,7 +71,8 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
     compliant = c.ground_stiffness > 0
     lagged = c.torque_lag > 0
     lag = np.where(lagged, c.torque_lag, 1.0)
-    S = np.zeros((6, n))            # y, z, ydot, zdot, depth, applied torque (lag state)
+    S = np.zeros((7, n))            # y, z, ydot, zdot, depth, applied torque (lag state), toe y
+    S[6] = np.nan
     S[1] = apex_height
     S[2] = forward_speed
     theta_hold = np.asarray(theta_td, dtype=float).copy()
@@ -78,7 +80,6 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
     tau_0 = np.asarray(tau_0, dtype=float)
     t_f = np.maximum(np.asarray(ramp_duration, dtype=float), 1e-6)
     mode = np.full(n, DESCENT)
-    toe_y = np.full(n, np.nan)
     t_td = np.full(n, np.nan)
     t_lo = np.full(n, np.nan)
     apex = np.full((4, n), np.nan)   # t, y, z, ydot of the next apex
@@ -93,7 +94,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
 
     def stance(tl, s):
         applied, target = torque(tl, s)
-        return laws.stance_forces(c, s[0], s[1], s[2], s[3], s[4], toe_y, applied, command=command(tl),
+        return laws.stance_forces(c, s[0], s[1], s[2], s[3], s[4], s[6], applied, command=command(tl),
                                   theta_td=theta_at_td, since_touchdown=tl - t_td, compliant=compliant), target
 
     def rhs(tl, s, md):
@@ -107,6 +108,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
             out[3] = np.where(st, f.zdd, fz)
             out[4] = np.where(st, f.depth_rate, 0.0)
             out[5] = np.where(st & lagged, (target - s[5]) / lag, 0.0)
+            out[6] = np.where(st, f.toe_rate, 0.0)
         else:
             out[2], out[3] = fy, fz
         out[:, md == DEAD] = 0.0
@@ -135,7 +137,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
     out = np.empty((5, n, samples), dtype=np.float32)
 
     def record(j):
-        dy = S[0] - toe_y
+        dy = S[0] - S[6]
         th = np.where(mode == STANCE, np.arctan2(-dy, S[1] - c.ground_height + S[4]), theta_hold)
         out[0, :, j], out[1, :, j], out[2, :, j], out[3, :, j], out[4, :, j] = S[0], S[1], th, S[2], S[3]
 
@@ -157,7 +159,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
                     td = ev & (mode == DESCENT)
                     if td.any():
                         vy, vz = laws.touchdown_velocity(c, theta_hold, S1[2], S1[3])
-                        toe_y[td] = (S1[0] + rho0 * np.sin(theta_hold))[td]
+                        S1[6, td] = (S1[0] + rho0 * np.sin(theta_hold))[td]
                         t_td[td] = te[td]
                         theta_at_td[td] = theta_hold[td]
                         S1[2, td], S1[3, td] = vy[td], vz[td]
@@ -166,7 +168,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
                         newmode[td] = STANCE
                     lo = ev & (mode == STANCE)
                     if lo.any():
-                        dy = S1[0] - toe_y
+                        dy = S1[0] - S1[6]
                         theta_lo = np.arctan2(-dy, S1[1] - c.ground_height + S1[4])
                         vy, vz = laws.liftoff_velocity(c, theta_lo, S1[2], S1[3])
                         theta_hold[lo] = theta_lo[lo]
@@ -185,7 +187,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
                 t += h
                 st = mode == STANCE
                 if st.any():    # collapse or tipping: the stride failed
-                    dy = S[0] - toe_y
+                    dy = S[0] - S[6]
                     hz = S[1] - c.ground_height + S[4]
                     rho = np.sqrt(dy * dy + hz * hz)
                     dead = st & ((rho < COLLAPSE_FRACTION * rho0) | (np.abs(np.arctan2(-dy, hz)) > MAX_LEG_ANGLE))

@@ -151,6 +151,7 @@ class Coefficients:
     leg_friction: object = 0.0              # F_c [N]: - F_c tanh(rho'/v_s)
     ground_stiffness: object = 0.0          # k_g [N/m], 0 = rigid ground
     ground_damping: object = 250.0          # d_g [N s/m]
+    ground_friction: object = math.inf      # mu [1]: the toe slides where |G_y| > mu G_z (inf: it never slips)
     # the hip actuator
     torque_gain: object = 1.0               # applied / commanded
     torque_offset: object = 0.0             # [N m] added in stance
@@ -196,7 +197,7 @@ class Coefficients:
         return tuple(f.name for f in fields(Coefficients) if f.name.endswith("_terms"))
 
 
-_OFF = {"torque_gain": 1.0, "torque_limit": math.inf}
+_OFF = {"torque_gain": 1.0, "torque_limit": math.inf, "ground_friction": math.inf}
 
 
 def active(c: Coefficients) -> frozenset:
@@ -209,6 +210,8 @@ def active(c: Coefficients) -> frozenset:
                      "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness"):
             if np.any(np.asarray(getattr(c, name)) != 0.0):
                 on.add(name)
+        if np.any(np.isfinite(np.asarray(c.ground_friction))):
+            on.add("ground_friction")
         for name in Coefficients.term_names():
             if any(np.any(np.asarray(v) != 0.0) for v in getattr(c, name)):
                 on.add(name)
@@ -310,6 +313,7 @@ class StanceForces:
     force: object        # along the leg [N]
     torque: object       # about the hip [N m], the applied torque plus hip losses and terms
     depth_rate: object   # toe sinking rate into a compliant ground [m/s]
+    toe_rate: object     # the toe's forward sliding speed on a ground of finite friction [m/s]
     ydd: object
     zdd: object
 
@@ -324,7 +328,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, *, co
 
     F is `leg_force` plus the discovered along-the-leg terms, tau the applied torque plus `hip_losses` and
     the discovered hip terms, r the horizontal mass ratio of the boom. A compliant ground holds the
-    massless toe with k_g depth + d_g depth' = the force's vertical component; depth' enters rho'.
+    massless toe with k_g depth + d_g depth' = the force's vertical component; depth' enters rho'. On a
+    ground of finite friction the toe slides (`toe_slip_rate`); its speed enters rho' the same way.
     """
     dy = y - toe_y
     hz = z - c.ground_height + depth
@@ -345,18 +350,48 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, *, co
                             c.leg_knot)
         spring_only = spring_only + _sum_terms(LEG_TERMS, c.leg_terms, ctx)
     depth_rate = 0.0
+    on = active(c)
     if compliant is None:
         compliant = np.asarray(c.ground_stiffness) > 0.0
-    if "ground_stiffness" in active(c):
+    if "ground_stiffness" in on:
         push = (spring_only - c.damping * approach) * cos - tau / rho * sin
         rate = (push - c.ground_stiffness * depth) / (c.ground_damping + c.damping * cos * cos)
         depth_rate = (rate if compliant else 0.0) if scalar else np.where(compliant, rate, 0.0)
     rho_dot = approach + cos * depth_rate
-    force = spring_only - c.damping * rho_dot
     across = tau / rho
+    toe_rate = 0.0
+    if "ground_friction" in on:
+        toe_rate = toe_slip_rate(c, spring_only - c.damping * rho_dot, across, sin, cos)
+        rho_dot = rho_dot + sin * toe_rate
+    force = spring_only - c.damping * rho_dot
     ydd = (-force * sin - across * cos) / (c.mass * (1.0 + c.horizontal_mass_ratio))
     zdd = (force * cos - across * sin) / c.mass - c.gravity
-    return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, ydd, zdd)
+    return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, toe_rate, ydd, zdd)
+
+
+MAX_SLIP_SPEED = 5.0   # [m/s] bound of the massless toe's sliding speed where the leg is nearly vertical
+
+
+def toe_slip_rate(c: Coefficients, stuck_force, across, sin, cos):
+    """Forward sliding speed of the massless toe on a ground of Coulomb friction mu (`ground_friction`).
+
+    The ground's force on the toe is the leg's, G = F e_rho + (tau/rho) e_theta. The toe sticks while
+    |G_y| <= mu G_z with F = `stuck_force` (the leg's force with the toe at rest); otherwise it slides in
+    the direction s = -sign(G_y) with G_y = -s mu G_z, which fixes the leg force at
+    F* = (tau/rho)(cos + s mu sin)/(s mu cos - sin), and the leg damper sets the speed that gives it:
+    F = stuck_force - d sin v_toe (rho' = rho'_stuck + sin v_toe). Static and kinetic friction are one mu.
+    """
+    mu = c.ground_friction
+    g_y = -stuck_force * sin - across * cos
+    g_z = stuck_force * cos - across * sin
+    s = -np.sign(g_y)
+    denominator = s * mu * cos - sin
+    with np.errstate(divide="ignore", invalid="ignore"):
+        boundary = across * (cos + s * mu * sin) / np.where(denominator == 0.0, np.nan, denominator)
+        speed = (stuck_force - boundary) / (c.damping * sin)
+    sliding = (np.abs(g_y) > mu * np.maximum(g_z, 0.0)) & (g_z > 0.0) & (s * speed > 0.0) & np.isfinite(speed)
+    rate = np.where(sliding, np.clip(np.nan_to_num(speed), -MAX_SLIP_SPEED, MAX_SLIP_SPEED), 0.0)
+    return float(rate) if np.ndim(rate) == 0 else rate
 
 
 # ---------------------------------------------------------------------------- the actuator

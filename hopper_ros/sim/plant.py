@@ -3,7 +3,7 @@
 State (SI, model coordinates: y forward, z body height above the model's z = 0; the running
 surface is at z = `ground_height`, 0 unless that effect is on): body (y, z, y', z'), leg angle
 and rate (theta, theta'), toe depth into a compliant ground, the torque the hip applies (the
-actuator's first-order lag state).
+actuator's first-order lag state), the toe's slide since touchdown (a ground of finite friction).
 
 Every force law, reset map and the actuator come from `laws`, parameterised by one
 `laws.Coefficients` of floats (`SimConfig.coefficients()`: the physics plus the enabled
@@ -42,7 +42,7 @@ EVENT_TIME_TOLERANCE = 1e-10  # [s]
 _ROOT_ITERATIONS = 60
 
 # state vector layout
-Y, Z, YDOT, ZDOT, THETA, THETA_DOT, DEPTH, TORQUE = range(8)
+Y, Z, YDOT, ZDOT, THETA, THETA_DOT, DEPTH, TORQUE, SLIP = range(9)
 
 
 @dataclass(frozen=True)
@@ -77,7 +77,7 @@ class Plant:
         self._actuator_key, self._actuator_target = None, 0.0
         self.h = config.period / config.substeps
         self.t = 0.0
-        self.state = [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        self.state = [0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
         self.in_contact = False
         self.fallen = False
         self.held = False            # held by hand at the throw's pose until released
@@ -111,7 +111,7 @@ class Plant:
         if z0 - laws.touchdown_height(c, leg_angle) <= 0.0:
             raise ValueError(f"a lead time of {lead_time} s before apex {apex_height} m puts the toe into the ground")
         self.t = t
-        self.state = [y0, z0, ydot0, zdot0, leg_angle, 0.0, 0.0, 0.0]
+        self.state = [y0, z0, ydot0, zdot0, leg_angle, 0.0, 0.0, 0.0, 0.0]
         self.in_contact, self.fallen, self.held = False, False, hold
         self.toe_y, self.touchdown_time, self.touchdown_angle = math.nan, math.nan, math.nan
         if lead_time > 0.0:
@@ -141,7 +141,7 @@ class Plant:
         through (as `physics.lanes`: the actuator's torque starts at touchdown)."""
         tau, _ = self._actuator(self._flight_c, torque(t), s, False)
         theta_ddot = (tau - self.leg_friction * s[THETA_DOT]) / self.leg_inertia
-        return body + [s[THETA_DOT], theta_ddot, 0.0, 0.0]
+        return body + [s[THETA_DOT], theta_ddot, 0.0, 0.0, 0.0]
 
     def _flight_rhs(self, t: float, s: list, torque: TorqueFunction) -> list:
         ydd, zdd = laws.flight_acceleration(self._flight_c, s[Y], s[Z], s[YDOT], s[ZDOT])
@@ -154,14 +154,15 @@ class Plant:
         """`laws.stance_forces` at this state, and the actuator lag's rate."""
         command = torque(t)
         tau, lag_rate = self._actuator(self._stance_c, command, s, self.lag > 0.0)
-        forces = laws.stance_forces(self._stance_c, s[Y], s[Z], s[YDOT], s[ZDOT], s[DEPTH], self.toe_y, tau,
+        forces = laws.stance_forces(self._stance_c, s[Y], s[Z], s[YDOT], s[ZDOT], s[DEPTH], self.toe_y + s[SLIP], tau,
                                     command=command, theta_td=self.touchdown_angle,
                                     since_touchdown=t - self.touchdown_time, compliant=self.compliant)
         return forces, lag_rate
 
     def _stance_rhs(self, t: float, s: list, torque: TorqueFunction) -> list:
         f, lag_rate = self._stance(t, s, torque)
-        return [s[YDOT], s[ZDOT], float(f.ydd), float(f.zdd), 0.0, 0.0, float(f.depth_rate), lag_rate]
+        return [s[YDOT], s[ZDOT], float(f.ydd), float(f.zdd), 0.0, 0.0, float(f.depth_rate), lag_rate,
+                float(f.toe_rate)]
 
     def _rk4(self, t: float, s: list, h: float, rhs, torque: TorqueFunction) -> list:
         k1 = rhs(t, s, torque)
@@ -186,7 +187,7 @@ class Plant:
 
     def _leg_vector(self, s: list) -> tuple[float, float]:
         """From the toe to the body: (y - y_toe, height above the toe)."""
-        return s[Y] - self.toe_y, s[Z] - self.ground_height + s[DEPTH]
+        return s[Y] - self.toe_y - s[SLIP], s[Z] - self.ground_height + s[DEPTH]
 
     def _extension(self, t: float, s: list, torque) -> float:
         dy, hz = self._leg_vector(s)
@@ -282,7 +283,7 @@ class Plant:
             self.toe_y = s[Y] + self.rest_length * math.sin(s[THETA])
             self.touchdown_time = self.t
             self.touchdown_angle = s[THETA]
-            s[DEPTH] = 0.0
+            s[DEPTH] = s[SLIP] = 0.0
             ydot, zdot = laws.touchdown_velocity(c, s[THETA], s[YDOT], s[ZDOT])
             s[YDOT], s[ZDOT] = float(ydot), float(zdot)
             self.events.append(self._event("touchdown", self.t, s))
@@ -331,12 +332,17 @@ class Plant:
         if not self.in_contact:
             return 0.0, 0.0
         s, applied = self.state, self.torque_now
-        f = laws.stance_forces(self._stance_c, s[Y], s[Z], s[YDOT], s[ZDOT], s[DEPTH], self.toe_y, applied,
+        f = laws.stance_forces(self._stance_c, s[Y], s[Z], s[YDOT], s[ZDOT], s[DEPTH], self.toe_y + s[SLIP], applied,
                                command=self.command_now, theta_td=self.touchdown_angle,
                                since_touchdown=self.t - self.touchdown_time, compliant=self.compliant)
         force, across = float(f.force), float(f.torque / f.rho)
         sin, cos = float(f.sin), float(f.cos)
         return -force * sin - across * cos, force * cos - across * sin
+
+    @property
+    def toe_position(self) -> float:
+        """Forward position of the toe [m] (where it touched down, plus its slide); nan in flight."""
+        return self.toe_y + self.state[SLIP] if self.in_contact else math.nan
 
     @property
     def leg_angle(self) -> float:

@@ -192,7 +192,7 @@ class SimRobot:
             forward += self._rng.gauss(0.0, self._force_noise)
             vertical += self._rng.gauss(0.0, self._force_noise)
         contact = vertical > self.config.contact_threshold
-        force = GroundForce(plant.t, forward, vertical, plant.toe_y if plant.in_contact else math.nan, contact)
+        force = GroundForce(plant.t, forward, vertical, plant.toe_position, contact)
         truth = TrueState(plant.t, s[0], s[1], s[2], s[3], s[4], s[5], plant.phase, plant.in_contact,
                           plant.torque_now, plant.fallen)
         return SimSample(packet, force, truth, events)
