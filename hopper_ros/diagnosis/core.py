@@ -760,6 +760,34 @@ def _fit_secondary(data, base, chosen, settings) -> None:
             chosen[i] = best
 
 
+def _discovered_look_alikes(data, base, chosen, settings, log) -> None:
+    """Each accepted library effect beside the term sets discovered where it acts, with the other accepted effects
+    in place: a set that passes its guards there and fits held-out strides not clearly worse (paired t below
+    `tie_t`) is reported as its look-alike. The rounds that found the set decided the name; this says what else the
+    data allow (a flight-only lift beside the effective gravity it looks like in flight, once a compliant ground
+    has been explained in stance)."""
+    for i, r in enumerate(chosen):
+        c = r["candidate"]
+        if c.kind == "discovered":
+            continue
+        ties = r.setdefault("ties", [])
+        known = {t["name"] for t in ties}
+        sites = [site for site in candidate_sites(c) if site in LOCATE_SITES and f"discovered_{site}" not in known]
+        if not sites:
+            continue
+        stack = Stack(base, chosen[:i] + chosen[i + 1:])
+        _, sets = locate(data, stack.variant())
+        found = [f for f in (discover_site(site, sets) for site in sites) if f is not None]
+        if not found:
+            continue
+        log["discoveries"].extend(found)
+        sse, errors = _baseline(data, stack)
+        ranking = _search(data, stack, [c] + [discovered_candidate(f) for f in found], settings, sse, errors)
+        own = next(x for x in ranking if x["name"] == c.name)
+        ties += [x for x in ranking if x is not own and x["significant"]
+                 and _paired_t(x["held_sse"], own["held_sse"]) < settings.tie_t]
+
+
 def _cumulative_errors(data, base, chosen, fold) -> None:
     """Held-out E_p/E_v/E_t after each accepted effect and those before it, at their final magnitudes."""
     for k in range(1, len(chosen) + 1):
@@ -791,6 +819,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
             or (len(chosen) > 1 and _lost_on_a_margin(log["first_ranking"]))):
         chosen = _restarts(data, base, settings, excited, chosen, log, fold, base_errors)
     _fit_secondary(data, base, chosen, settings)
+    _discovered_look_alikes(data, base, chosen, settings, log)
     current = Stack(base, chosen).variant()
     _cumulative_errors(data, base, chosen, fold)
     final_sim = simulate_variants(data, [base, current], keep_series=True)
@@ -870,19 +899,23 @@ def _restarts(data, base, settings, excited, chosen, log, fold, base_errors) -> 
     and none of them worse than the model's own (two explanations trade a little E_t for E_p; each compared
     alone, the guard would keep the wrong one)."""
     first = chosen[0]["name"]
-    pool = _lost_on_a_margin(log["first_ranking"]) if len(chosen) > 1 else []
-    pool += [r for r in log["first_ranking"] if r["name"] != first and not r.get("margin_only")
-             and r["reduction"] >= settings.min_reduction and r["t"] >= settings.min_t
-             and (r["candidate"].kind != "sensor" or _plausible(r))][:settings.restarts]
+    margin = _lost_on_a_margin(log["first_ranking"]) if len(chosen) > 1 else []
+    lost = {r["name"] for r in margin}
+    # (a sensor fault that lost its round on the sensor margin without fitting better is a runner-up as well: a
+    # theta encoder's offset behind the torque offset that stands in for it)
+    pool = [(r, True) for r in margin] + [
+        (r, False) for r in [r for r in log["first_ranking"] if r["name"] != first and r["name"] not in lost
+                             and r["reduction"] >= settings.min_reduction and r["t"] >= settings.min_t
+                             and (r["candidate"].kind != "sensor" or _plausible(r))][:settings.restarts]]
     best_sse, best_pred = _held_out(data, base, chosen, fold)
     best, best_errors = chosen, _errors(data, best_pred)
-    for r in pool:
+    for r, smaller in pool:
         start = dict(r, ties=[], location=[], alternatives=[x["candidate"] for x in log["first_ranking"]
                                                              [:settings.screen] if x["name"] != r["name"]])
         trial, _, _ = _rounds(data, base, settings, excited, [start], r["held_sse"], r["errors"],
                               {"rounds": [], "discoveries": []})
         trial = [e for e in trial if e["candidate"].kind != "sensor" or _plausible(e)]
-        fewest, most = (1, len(chosen) - 1) if r.get("margin_only") else (2, settings.max_effects)
+        fewest, most = (1, len(chosen) - 1) if smaller else (2, settings.max_effects)
         if not fewest <= len(trial) <= most:
             continue
         sse, pred = _held_out(data, base, trial, fold)

@@ -69,6 +69,8 @@ FLIGHT_Z_TERMS = (
      lambda c: np.abs(c.zdot) * c.zdot),
     ("sign(zdot)", "a constant vertical force against the motion (dry friction of the boom's horizontal axis)", "N",
      lambda c: smooth_sign(c.zdot)),
+    ("|zdot|", "a vertical force proportional to the vertical speed's size (with zdot: a drag on the way up or down "
+     "only)", "N s/m", lambda c: np.abs(c.zdot)),
     ("z", "a vertical force proportional to the height (a spring pulling the boom)", "N/m", lambda c: c.z),
     ("ydot", "a vertical force proportional to the forward speed", "N s/m", lambda c: c.ydot),
     ("z>z_k", "a force proportional to the height above z_k (something that engages above a height: "
@@ -81,6 +83,8 @@ LEG_TERMS = (   # along the leg, positive pushing the body away from the toe
     ("x^3", "a force cubic in the leg's compression (a hardening spring)", "N/m^3", lambda c: c.compression ** 3),
     ("rho'", "a force proportional to the leg's extension rate (extra leg damping)", "N s/m", lambda c: -c.rho_dot),
     ("|rho'|rho'", "a force quadratic in the leg's extension rate", "N s^2/m^2", lambda c: -np.abs(c.rho_dot) * c.rho_dot),
+    ("|rho'|", "a force proportional to the leg's speed in either direction (with rho': damping that differs in "
+     "compression and extension)", "N s/m", lambda c: -np.abs(c.rho_dot)),
     ("sign(rho')", "a constant force against the leg's sliding (dry friction in the leg)", "N",
      lambda c: -smooth_sign(c.rho_dot)),
     ("t", "a force growing with the time since touchdown", "N/s", lambda c: c.since_touchdown),
