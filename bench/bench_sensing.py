@@ -63,7 +63,7 @@ REALTIME_PRIORITY = 50   # SCHED_FIFO of every process of the main run, as in la
 
 def _packets(duration, seed=3):
     from hopper_ros.config import load_yaml
-    from hopper_ros.sensing.evaluation import record_experiments
+    from hopper_ros.harness.sensing_evaluation import record_experiments
     from hopper_ros.sim.config import load_sim_config
     from hopper_ros.sim.robot import SimRobot
 

@@ -23,9 +23,9 @@ from hopper_ros.sensing.pipeline import SensingPipeline
 from hopper_ros.sensing.samples import EventType
 from hopper_ros.sim.robot import SimRobot
 
-from .deadbeat import DeadbeatController, StrideDecision
-from .closed_loop import decide_at_apex
-from .stride_machine import StrideMachine
+from hopper_ros.control.deadbeat import DeadbeatController, StrideDecision
+from hopper_ros.control.closed_loop import decide_at_apex
+from hopper_ros.control.stride_machine import StrideMachine
 
 _CHANNELS = iter(range(1 << 30))
 
