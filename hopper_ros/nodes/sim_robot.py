@@ -42,6 +42,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from builtin_interfaces.msg import Time as TimeMsg
 
+from hopper_ros.canbus.driver.bus import open_drive_side, sim_transport
 from hopper_ros.config_schemas import load_hardware
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.msg import ApexState, BodyState, GaitEvent, GroundReactionForce
@@ -58,25 +59,15 @@ RESYNC_LATENESS = 0.05     # [s] further behind than this, real-time mode stops 
 
 
 def open_drive(can_setting: str, hardware: dict, port: int):
-    """The emulated EPOS2 on the bus `can_setting` names; returns (drive, closer, hub or None),
-    (None, None, None) for no drive."""
-    if can_setting == "none":
+    """The emulated EPOS2 on the transport `can_setting` names (canbus.driver.bus.sim_transport, the
+    motor driver's own selection); returns (drive, closer, hub or None), (None, None, None) for none."""
+    transport = sim_transport(can_setting, hardware["can"], port)
+    if transport is None:
         return None, None, None
-    import can
-
     from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 
-    if can_setting.startswith("virtual:"):
-        bus = can.Bus(interface="virtual", channel=can_setting.split(":", 1)[1], receive_own_messages=False)
-        return Epos2Emulator(bus, hardware), bus.shutdown, None
-    if can_setting == "hub":
-        from hopper_ros.canbus.socketcand_server import SocketcandServer
-
-        settings = hardware["can"]
-        server = SocketcandServer(host=settings["host"], port=port, channel=settings["channel"])
-        server.start()
-        return Epos2Emulator(server.local_bus(), hardware), server.close, server
-    raise ValueError(f"can must be 'hub', 'virtual:CHANNEL' or 'none', got {can_setting!r}")
+    bus, close, hub = open_drive_side(transport)
+    return Epos2Emulator(bus, hardware), close, hub
 
 
 class SimRobotNode(Node):
