@@ -269,7 +269,7 @@ def _floor(role, namespace, source, target, duration):
     from rclpy.experimental import EventsExecutor
 
     from hopper_ros.msg import BodyMeasurement
-    from hopper_ros.sensing.messages import sample_qos
+    from hopper_ros.nodes.sensing_messages import sample_qos
 
     rclpy.init()
     node = rclpy.create_node(f"bench_{role}", namespace=namespace, start_parameter_services=False)

@@ -149,9 +149,9 @@ def collect(output: str | os.PathLike, sim_config: SimConfig, hardware, settings
 
     `draws` (apex height, forward speed, theta_td, tau_0, t_f) replaces the thesis-range draws.
     """
-    from builtin_interfaces.msg import Time as TimeMsg
 
     from hopper_ros.recording.recordings import Recording, write_csv
+    from hopper_ros.nodes.stamps import stamp_of_ns
     from hopper_ros.msg import BodyMeasurement, BodyState, GaitEvent, GroundReactionForce, StrideCommand
 
     if csv_path is not None and Path(csv_path).exists():
@@ -183,9 +183,7 @@ def collect(output: str | os.PathLike, sim_config: SimConfig, hardware, settings
 
     def stamp(t: float, message_stamp=None):
         ns = origin_ns + int(round(t * 1e9))
-        out = message_stamp if message_stamp is not None else TimeMsg()
-        out.sec, out.nanosec = divmod(ns, 1_000_000_000)
-        return out, ns
+        return stamp_of_ns(ns, message_stamp), ns
 
     limit = settings.experiments if settings.experiments is not None else settings.strides * settings.max_attempts_per_stride
     source = iter(draws) if draws is not None else _draws(params, settings.seed)

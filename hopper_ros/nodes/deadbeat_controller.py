@@ -37,7 +37,6 @@ from __future__ import annotations
 import math
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -47,7 +46,7 @@ from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings, St
 from hopper_ros.control.stride_machine import Phase
 from hopper_ros.control.stride_policy import StridePolicy, StrideSettings
 from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
-from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.common import read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import (DIAGNOSTICS_TOPIC, ERROR, OK, WARN, DiagnosticsReporter, level_of,
                                           split_node_name)
 from hopper_ros.nodes.stamps import to_seconds, to_stamp
@@ -61,8 +60,7 @@ COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=R
 class DeadbeatControllerNode(Node):
     def __init__(self, **node_kwargs):
         super().__init__("deadbeat_controller", **node_kwargs)
-        param = lambda name, default, text: self.declare_parameter(  # noqa: E731
-            name, default, ParameterDescriptor(description=text, read_only=True)).value
+        param = read_only_parameters(self)
         model_file = param("model_file", "model.yaml", "model parameters (YAML)")
         config_file = param("config_file", "control.yaml", "controller settings (YAML)")
         self.experiment = param("experiment", "closed_loop", "closed_loop or single_stride")

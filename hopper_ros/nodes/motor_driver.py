@@ -24,7 +24,6 @@ from __future__ import annotations
 import sys
 import threading
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -35,8 +34,9 @@ from hopper_ros.canbus.driver.bus import open_transport
 from hopper_ros.canbus.driver.cycle import CycleLoop
 from hopper_ros.msg import MotorCommand, MotorStatus
 from hopper_ros.nodes import diagnostics
-from hopper_ros.nodes.common import run_node, stop_requested
+from hopper_ros.nodes.common import read_only_parameters, run_node, stop_requested
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
+from hopper_ros.nodes.stamps import now_seconds, to_seconds
 
 #: commands: the latest one matters (a stale one is worse than none); matches reliable publishers too
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -64,22 +64,18 @@ class MotorDriverNode(Node):
         # measurably fewer commands overtaken before the executor takes them (bench_motor_driver).
         node_kwargs.setdefault("start_parameter_services", False)
         super().__init__("motor_driver", **node_kwargs)
-        read_only = lambda text: ParameterDescriptor(description=text, read_only=True)  # noqa: E731
-        config_file = self.declare_parameter("config_file", "motor_driver.yaml", read_only("driver settings (YAML)")).value
+        param = read_only_parameters(self)
+        config_file = param("config_file", "motor_driver.yaml", "driver settings (YAML)")
         section = load_section(config_file)
-        hardware_file = self.declare_parameter(
-            "hardware_file", str(section.get("hardware_file", "hardware.yaml")), read_only("hardware (YAML)")).value
-        bus_overrides = {name: self.declare_parameter(name, "", read_only(f"CAN {name} ('' = hardware file)")).value
+        hardware_file = param("hardware_file", str(section.get("hardware_file", "hardware.yaml")), "hardware (YAML)")
+        bus_overrides = {name: param(name, "", f"CAN {name} ('' = hardware file)")
                          for name in ("interface", "channel", "host")}
-        bus_overrides["port"] = self.declare_parameter("port", 0, read_only("CAN socketcand port (0 = hardware file)")).value
-        command_timeout = self.declare_parameter(
-            "command_timeout", float(section.get("command_timeout", DriverSettings.command_timeout)),
-            read_only("[s] no command this long: quick stop, then disable")).value
-        sync_period = self.declare_parameter(
-            "sync_period", float(section.get("sync_period", DriverSettings.sync_period)), read_only("[s] SYNC period")).value
-        status_decimation = self.declare_parameter(
-            "status_decimation", int(section.get("status_decimation", 1)),
-            read_only("motor_status on every Nth TPDO set (1: every SYNC)")).value
+        bus_overrides["port"] = param("port", 0, "CAN socketcand port (0 = hardware file)")
+        command_timeout = param("command_timeout", float(section.get("command_timeout", DriverSettings.command_timeout)),
+                                "[s] no command this long: quick stop, then disable")
+        sync_period = param("sync_period", float(section.get("sync_period", DriverSettings.sync_period)), "[s] SYNC period")
+        status_decimation = param("status_decimation", int(section.get("status_decimation", 1)),
+                                  "motor_status on every Nth TPDO set (1: every SYNC)")
         diagnostics_period = float(section.get("diagnostics_period", 0.5))
         settings = DriverSettings.from_mapping(section, command_timeout=command_timeout, sync_period=sync_period)
         hardware = load_hardware(hardware_file)
@@ -111,8 +107,7 @@ class MotorDriverNode(Node):
     def _on_command(self, msg: MotorCommand) -> None:
         age = 0.0
         if msg.mode == MotorCommand.MODE_RAMP:   # the ramp started at the stamp (touchdown), on the host clock
-            stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-            age = self.get_clock().now().nanoseconds * 1e-9 - stamp
+            age = now_seconds(self) - to_seconds(msg.header.stamp)
         with self._lock:
             self._driver.command(msg.mode, msg.setpoint, msg.duration, age)
 

@@ -3,6 +3,8 @@ of the nodes (the libraries below them speak seconds)."""
 
 from __future__ import annotations
 
+import math
+
 from builtin_interfaces.msg import Time as TimeMsg
 
 
@@ -12,8 +14,10 @@ def to_seconds(stamp: TimeMsg) -> float:
 
 
 def to_stamp(seconds: float, stamp: TimeMsg | None = None) -> TimeMsg:
-    """Seconds as a stamp (filled in place when `stamp` is given), to the nearest nanosecond."""
-    return stamp_of_ns(int(round(seconds * 1e9)), stamp)
+    """Seconds as a stamp (filled in place when `stamp` is given), to the nearest nanosecond of the
+    float (whole seconds split off first: seconds * 1e9 would lose the last digits)."""
+    whole = math.floor(seconds)
+    return stamp_of_ns(int(whole) * 1_000_000_000 + int(round((seconds - whole) * 1e9)), stamp)
 
 
 def stamp_of_ns(nanoseconds: int, stamp: TimeMsg | None = None) -> TimeMsg:
