@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
+from hopper_ros.config_schemas import check_effects
 from hopper_ros.identification.crossval import cross_validate
-from hopper_ros.identification.lanesfit import check_effects, cost_gradient, cost_of_residuals, with_effects
+from hopper_ros.identification.lanesfit import cost_gradient, cost_of_residuals, with_effects
 from hopper_ros.identification.settings import load_settings
 from hopper_ros.identification.strides import Strides
 from hopper_ros.physics import lanes
