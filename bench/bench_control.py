@@ -1,6 +1,6 @@
 """The deadbeat controller: decision cost and closed-loop accuracy on the simulated robot.
 
-The closed loop runs in lockstep without ROS (hopper_ros.control.lockstep): the simulated robot
+The closed loop runs in lockstep without ROS (hopper_ros.harness.lockstep): the simulated robot
 of config/sim.yaml (flight damping, lift-off collision and boom gravity on) follows the Fig 5.5
 schedule (0.39 m / 2 m/s -> 0.42 m / 2 m/s -> 0.38 m / 2.5 m/s), 20 strides per segment, the
 schedule three times (180 strides; quick: once with 12 per segment), with adaptation on, then
@@ -27,7 +27,7 @@ sys.path.insert(0, str(REPO))
 
 from hopper_ros.config import load_yaml  # noqa: E402
 from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings  # noqa: E402
-from hopper_ros.control.lockstep import run_closed_loop, summarise  # noqa: E402
+from hopper_ros.harness.lockstep import run_closed_loop, summarise  # noqa: E402
 from hopper_ros.physics.params import load_params  # noqa: E402
 from hopper_ros.sim.config import load_sim_config  # noqa: E402
 

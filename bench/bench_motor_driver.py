@@ -50,7 +50,7 @@ def run(quick=False):
     from hopper_ros.canbus.epos2_emulator import Epos2Emulator
     from hopper_ros.canbus.epos2_objects import rpdo_cob_id
     from hopper_ros.canbus.socketcand_server import SocketcandServer
-    from hopper_ros.motor_driver import load_hardware
+    from hopper_ros.canbus.driver import load_hardware
 
     hardware = load_hardware()
     node_id = hardware["drive"]["node_id"]
@@ -130,7 +130,7 @@ def _publish(topic, total, rate_hz):
     import rclpy
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    from hopper_ros.motor_driver import load_hardware
+    from hopper_ros.canbus.driver import load_hardware
     from hopper_ros.msg import MotorCommand
 
     hardware = load_hardware()

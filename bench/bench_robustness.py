@@ -57,7 +57,7 @@ SIGTERM_RUNS = 3
 
 
 def _hardware():
-    from hopper_ros.motor_driver import load_hardware
+    from hopper_ros.canbus.driver import load_hardware
     return load_hardware()
 
 
@@ -530,7 +530,7 @@ def _can_fuzz(quick):
 
     from hopper_ros.canbus import epos2_objects as eo
     from hopper_ros.canbus.epos2_objects import Command, State
-    from hopper_ros.motor_driver import MODE_CURRENT
+    from hopper_ros.canbus.driver import MODE_CURRENT
     from test_motor_driver import NODE, Rig
 
     frames_per_seed = QUICK_CAN_FRAMES_PER_SEED if quick else CAN_FRAMES_PER_SEED

@@ -63,7 +63,7 @@ REALTIME_PRIORITY = 50   # SCHED_FIFO of every process of the main run, as in la
 
 def _packets(duration, seed=3):
     from hopper_ros.config import load_yaml
-    from hopper_ros.sensing.evaluation import record_experiments
+    from hopper_ros.harness.sensing_evaluation import record_experiments
     from hopper_ros.sim.config import load_sim_config
     from hopper_ros.sim.robot import SimRobot
 
@@ -269,7 +269,7 @@ def _floor(role, namespace, source, target, duration):
     from rclpy.experimental import EventsExecutor
 
     from hopper_ros.msg import BodyMeasurement
-    from hopper_ros.sensing.messages import sample_qos
+    from hopper_ros.nodes.sensing_messages import sample_qos
 
     rclpy.init()
     node = rclpy.create_node(f"bench_{role}", namespace=namespace, start_parameter_services=False)

@@ -268,12 +268,36 @@ def _bounds_ordered(values: dict):
     return None
 
 
+# ModelParams field -> the laws.Coefficients field it sets (toe_mass through the collision factor)
+MODEL_COEFFICIENT = {"body_mass": "mass", "toe_mass": "collision_factor", "gravity": "gravity",
+                     "stiffness": "stiffness", "damping": "damping", "flight_damping_horizontal": "flight_damping_y",
+                     "flight_damping_vertical": "flight_damping_z", "rest_length": "rest_length"}
+
+
+def check_effects(names, fitted) -> tuple[str, ...]:
+    """Validated effect names for an identification that fits the model parameters `fitted`."""
+    from hopper_ros.physics import effects as effect_library
+
+    names = tuple(names)
+    if len(set(names)) != len(names):
+        raise ValueError(f"effects: an effect is named twice: {list(names)}")
+    fitted_coefficients = {MODEL_COEFFICIENT[n]: n for n in fitted}
+    for name in names:
+        effect = effect_library.get(name)
+        if effect.kind != "physics":
+            raise ValueError(f"effects: {name} is a sensor fault; identify fits physics effects only "
+                             "(hopper diagnose estimates sensor faults)")
+        coefficient = "collision_factor" if effect.primary.coefficient == "toe_mass" else effect.primary.coefficient
+        if coefficient in fitted_coefficients:
+            raise ValueError(f"effects: {name} sets {effect.primary.coefficient}, which the fit already fits as the "
+                             f"model parameter {fitted_coefficients[coefficient]}; drop one of them (--fit or --effects)")
+    return names
+
+
 def _effects_identifiable(values: dict):
     """The effects are library physics entries, named once, none setting a parameter `fitted` fits."""
     if not values.get("effects"):
         return None
-    from hopper_ros.identification.lanesfit import check_effects
-
     try:
         check_effects(values["effects"], values.get("fitted", ()))
     except ValueError as exc:

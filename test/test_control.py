@@ -1,6 +1,6 @@
 """The deadbeat controller (chapter 5) and the hip state machines, without ROS.
 
-Closed loop on the simulated robot in lockstep (hopper_ros.control.lockstep): the robot of
+Closed loop on the simulated robot in lockstep (hopper_ros.harness.lockstep): the robot of
 config/sim.yaml with flight damping, lift-off collision and boom gravity on.
 """
 
@@ -12,7 +12,7 @@ import pytest
 
 from hopper_ros.config import load_yaml
 from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings
-from hopper_ros.control.lockstep import run_closed_loop, summarise
+from hopper_ros.harness.lockstep import run_closed_loop, summarise
 from hopper_ros.control.stride_machine import MODE_CURRENT, MODE_DISABLED, MODE_POSITION, Phase, StrideMachine, StridePlan
 from hopper_ros.physics.params import load_params
 from hopper_ros.physics.predictors import predict_stride
@@ -145,7 +145,7 @@ def test_bad_settings_name_the_problem():
 
 def test_the_whole_graph_logic_closes_the_loop_in_lockstep():
     """Every module the nodes wrap, chained in one process: packets, sensing, controller, CANopen."""
-    from hopper_ros.control.graph_lockstep import GraphLockstep
+    from hopper_ros.harness.graph_lockstep import GraphLockstep
 
     schedule = [(0.39, 2.0)] * 6 + [(0.42, 2.0)] * 6 + [(0.38, 2.5)] * 6
     graph = GraphLockstep(load_sim_config(), HARDWARE, controller())

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from hopper_ros.identification.grf import PROFILES, kalman_smooth, simulate_profiles
+from hopper_ros.harness.grf import simulate_profiles
+from hopper_ros.identification.grf import PROFILES, kalman_smooth
 
 
 def test_the_smoother_recovers_the_acceleration_of_quantised_positions():

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hopper_ros.identification.cost import stride_errors
-from hopper_ros.identification.recordings import Recording, RecordingError, load_bag, load_csv, write_csv
+from hopper_ros.recording.recordings import Recording, RecordingError, load_bag, load_csv, write_csv
 from hopper_ros.identification.settings import FITTABLE, load_settings
 from hopper_ros.identification.strides import extract_strides
 from hopper_ros.physics.params import ModelParams
@@ -23,7 +23,7 @@ TRUTH = ModelParams()            # config/sim.yaml's robot with its three model 
 def noisy_collection(tmp_path_factory):
     """60 strides of the simulated robot, every sensor noise on, as a bag and an unlabelled CSV."""
     from hopper_ros.config import load_yaml
-    from hopper_ros.recording.collect import CollectionSettings, collect
+    from hopper_ros.harness.collect import CollectionSettings, collect
     from hopper_ros.sim.config import SENSORS, load_sim_config
 
     folder = tmp_path_factory.mktemp("noisy_collection")

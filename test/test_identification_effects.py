@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
+from hopper_ros.config_schemas import check_effects
 from hopper_ros.identification.crossval import cross_validate
-from hopper_ros.identification.lanesfit import check_effects, cost_gradient, cost_of_residuals, with_effects
+from hopper_ros.identification.lanesfit import cost_gradient, cost_of_residuals, with_effects
 from hopper_ros.identification.settings import load_settings
 from hopper_ros.identification.strides import Strides
 from hopper_ros.physics import lanes
@@ -152,7 +153,7 @@ def test_model_file_with_effects_round_trips_and_bad_entries_name_the_file_and_k
 
 def exact_run(strides: int, seed: int = 3):
     """Back-to-back strides of the exact model at 1 kHz, as a CSV-like recording (t, y, z, theta, tau)."""
-    from hopper_ros.identification.recordings import Recording
+    from hopper_ros.recording.recordings import Recording
     from hopper_ros.physics.aas import predict_aas
     from hopper_ros.physics.exact import simulate_stride
 
@@ -175,7 +176,7 @@ def exact_run(strides: int, seed: int = 3):
 
 
 def test_identify_with_effects_writes_a_model_file_load_model_reads(hopper_cli, tmp_path):
-    from hopper_ros.identification.recordings import write_csv
+    from hopper_ros.recording.recordings import write_csv
 
     csv_path = write_csv(tmp_path / "run.csv", exact_run(12))
     out = tmp_path / "identified"

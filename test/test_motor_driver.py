@@ -1,4 +1,4 @@
-"""The motor driver (hopper_ros.motor_driver) against the emulated EPOS2 on a python-can `virtual`
+"""The motor driver (hopper_ros.canbus.driver) against the emulated EPOS2 on a python-can `virtual`
 bus, with the independent `canopen` library on the same bus reading the drive's configuration
 back by SDO and decoding every PDO, EMCY and heartbeat.
 
@@ -21,7 +21,7 @@ import pytest
 from hopper_ros.canbus import epos2_objects as eo
 from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 from hopper_ros.canbus.epos2_objects import Command, NmtState, State
-from hopper_ros.motor_driver import (
+from hopper_ros.canbus.driver import (
     ERROR,
     MODE_CURRENT,
     MODE_DISABLED,

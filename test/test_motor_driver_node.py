@@ -16,7 +16,7 @@ from hopper_ros.canbus import epos2_objects as eo
 from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 from hopper_ros.canbus.epos2_objects import Command, NmtState, State
 from hopper_ros.canbus.socketcand_server import SocketcandServer
-from hopper_ros.motor_driver import load_hardware
+from hopper_ros.canbus.driver import load_hardware
 
 HW = load_hardware()
 K_T, GEAR = HW["motor"]["torque_constant"], HW["motor"]["gear_ratio"]

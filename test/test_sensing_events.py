@@ -1,7 +1,7 @@
 """The event detector (and the whole sensing chain) as plain modules on the simulated robot.
 
 Ground truth: SimRobot's own events (located to 1e-10 s) while it runs section 4.1's
-single-stride experiments, thrown anew after each (hopper_ros.sensing.evaluation).
+single-stride experiments, thrown anew after each (hopper_ros.harness.sensing_evaluation).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from hopper_ros.config import load_yaml
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.config import load_sensing_config
-from hopper_ros.sensing.evaluation import (MCU_CLOCK_OFFSET, detected_in_sim_time, inject_faults, match_events,
+from hopper_ros.harness.sensing_evaluation import (MCU_CLOCK_OFFSET, detected_in_sim_time, inject_faults, match_events,
                                            receive_times, record_experiments, replay, toe_heights, true_events)
 from hopper_ros.sensing.events import EventDetector, Phase
 from hopper_ros.sensing.pipeline import SensingPipeline

@@ -20,7 +20,7 @@ from hopper_ros.config import load_yaml
 from hopper_ros.hardware.encoders import BoomKinematics, to_register
 from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.config import load_sensing_config
-from hopper_ros.sensing.evaluation import (MCU_CLOCK_OFFSET, inject_faults, match_events, receive_times,
+from hopper_ros.harness.sensing_evaluation import (MCU_CLOCK_OFFSET, inject_faults, match_events, receive_times,
                                            record_experiments, toe_heights, true_events)
 from hopper_ros.sensing.samples import EventType
 from hopper_ros.sim.config import load_sim_config

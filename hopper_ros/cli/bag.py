@@ -95,7 +95,7 @@ def _recover_main(args) -> int:
 
 
 def _record(args) -> int:
-    from hopper_ros.nodes.common import StopSignals
+    from hopper_ros.nodes.signals import StopSignals
     from hopper_ros.recording.bag import BagError, BagWriter
 
     if bool(args.all) == bool(args.topics):

@@ -24,7 +24,7 @@ def main(args: argparse.Namespace) -> int:
 
 def _main(args: argparse.Namespace) -> int:
     from hopper_ros.diagnosis import DiagnosisError, diagnose_file
-    from hopper_ros.identification.recordings import RecordingError
+    from hopper_ros.recording.recordings import RecordingError
 
     from hopper_ros.config_schemas import load_model
     from hopper_ros.schema import ConfigError

@@ -48,7 +48,7 @@ def main(args: argparse.Namespace) -> int:
 def _main(args: argparse.Namespace) -> int:
     from hopper_ros.identification.crossval import format_error_table, format_parameter_table
     from hopper_ros.identification.pipeline import identify
-    from hopper_ros.identification.recordings import RecordingError
+    from hopper_ros.recording.recordings import RecordingError
     from hopper_ros.identification.settings import load_settings
     from hopper_ros.recording.bag import BagError
     from hopper_ros.schema import ConfigError

@@ -80,7 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from hopper_ros.nodes.common import StopSignals
+    from hopper_ros.nodes.signals import StopSignals
 
     stop = StopSignals().install()  # Ctrl-C / SIGTERM end the command cleanly (exit 0)
     import rclpy

@@ -1,6 +1,6 @@
 """Fig 5.3 at an apex: the deadbeat controller's two stages driving the stride machine.
 
-Shared by the deadbeat_controller node and the in-process graph (`graph_lockstep`), so the
+Shared by the deadbeat_controller node and the in-process graph (`harness.graph_lockstep`), so the
 closed loop they run is one piece of code.
 """
 

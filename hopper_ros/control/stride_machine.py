@@ -23,6 +23,8 @@ import math
 from dataclasses import dataclass
 from enum import Enum
 
+from hopper_ros.physics.laws import ramp_torque
+
 MODE_DISABLED, MODE_CURRENT, MODE_POSITION = 0, 1, 2
 
 
@@ -120,11 +122,8 @@ class StrideMachine:
         if phase is Phase.IDLE:
             return MODE_DISABLED, 0.0
         if phase is Phase.STANCE:
-            elapsed = now - self.touchdown_time
-            t_f = self.plan.ramp_duration
-            if 0.0 <= elapsed < t_f:
-                return MODE_CURRENT, -self.plan.tau_0 * (1.0 - elapsed / t_f)       # (2.32)
-            return MODE_CURRENT, 0.0
+            return MODE_CURRENT, ramp_torque(float(now - self.touchdown_time), float(self.plan.tau_0),
+                                             float(self.plan.ramp_duration))       # (2.32)
         if phase is Phase.PRE_TOUCHDOWN:
             return MODE_CURRENT, 0.0
         if math.isfinite(self.hold_angle):

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .recordings import Recording
+from hopper_ros.recording.recordings import Recording
 from .strides import Strides
 
 SIGMA_JERK = 60.0         # [m/s^3] white-jerk intensity of the constant-acceleration model (appendix A's
@@ -140,33 +140,3 @@ def stance_forces(recording: Recording, strides: Strides, index: int, body_mass:
 PROFILES = ("none", "ramp", "constant")
 PROFILE_TITLES = {"none": "no torque (lossy SLIP, Fig 4.8a)", "ramp": "ramp torque (2.32) (TD-SLIP, Fig 4.8b)",
                   "constant": "constant torque (Fig 4.9)"}
-
-
-def simulate_profiles(folder, sim_config, hardware, grf_settings, params) -> dict[str, StanceForces]:
-    """One single-stride experiment per torque profile on the simulated robot, recorded as a bag
-    in `folder/<profile>` (body_measurement and force_plate), then its stance GRF both ways."""
-    from pathlib import Path
-
-    from hopper_ros.physics.aas import predict_aas
-    from hopper_ros.recording.collect import CollectionSettings, collect
-
-    from .recordings import load_bag
-    from .strides import extract_strides
-
-    g = grf_settings
-    theta = math.radians(g.touchdown_angle_deg)
-    ramp = float(predict_aas(params, g.apex_height, g.forward_speed, theta, g.tau_0).stance_time)
-    out = {}
-    for profile in PROFILES:
-        path = Path(folder) / profile
-        collection = collect(path, sim_config, hardware, CollectionSettings(experiments=1, torque_profile=profile),
-                             draws=[(g.apex_height, g.forward_speed, theta, g.tau_0, ramp)])
-        if not collection.kept:
-            raise ValueError(f"the {profile} GRF stride failed ({collection.discarded}); change identification.grf")
-        recording = load_bag(path)
-        strides = extract_strides(recording, params.rest_length)
-        if len(strides) != 1:
-            raise ValueError(f"the {profile} GRF recording holds {len(strides)} strides, expected 1 ({strides.rejected})")
-        out[profile] = stance_forces(recording, strides, 0, params.body_mass, params.gravity, params.rest_length,
-                                     PROFILE_TITLES[profile], g.position_noise, g.sigma_jerk, g.moving_average)
-    return out

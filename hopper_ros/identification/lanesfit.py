@@ -43,12 +43,6 @@ from hopper_ros.physics.params import ModelParams
 from .cost import OUTCOMES, StrideErrors, errors_of
 from .strides import Strides
 
-# ModelParams field -> the laws.Coefficients field it sets (toe_mass through the collision factor)
-MODEL_COEFFICIENT = {"body_mass": "mass", "toe_mass": "collision_factor", "gravity": "gravity",
-                     "stiffness": "stiffness", "damping": "damping", "flight_damping_horizontal": "flight_damping_y",
-                     "flight_damping_vertical": "flight_damping_z", "rest_length": "rest_length"}
-
-
 def model_coefficients(values: dict) -> laws.Coefficients:
     """laws.Coefficients of the model's parameters (a mapping of every ModelParams field), without
     ModelParams' validation (the search may pass a damping ratio above 1: the laws integrate it)."""
@@ -63,24 +57,6 @@ def with_effects(params: ModelParams, magnitudes: dict[str, float]) -> laws.Coef
     """The laws' coefficients of a model with library effects on ({name: physical magnitude})."""
     coefficients, _ = effect_library.apply(model_coefficients(params.as_dict()), magnitudes)
     return coefficients
-
-
-def check_effects(names, fitted) -> tuple[str, ...]:
-    """Validated effect names for an identification that fits the model parameters `fitted`."""
-    names = tuple(names)
-    if len(set(names)) != len(names):
-        raise ValueError(f"effects: an effect is named twice: {list(names)}")
-    fitted_coefficients = {MODEL_COEFFICIENT[n]: n for n in fitted}
-    for name in names:
-        effect = effect_library.get(name)
-        if effect.kind != "physics":
-            raise ValueError(f"effects: {name} is a sensor fault; identify fits physics effects only "
-                             "(hopper diagnose estimates sensor faults)")
-        coefficient = "collision_factor" if effect.primary.coefficient == "toe_mass" else effect.primary.coefficient
-        if coefficient in fitted_coefficients:
-            raise ValueError(f"effects: {name} sets {effect.primary.coefficient}, which the fit already fits as the "
-                             f"model parameter {fitted_coefficients[coefficient]}; drop one of them (--fit or --effects)")
-    return names
 
 
 class LanesVector:

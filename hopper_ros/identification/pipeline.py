@@ -14,7 +14,7 @@ from hopper_ros.physics.params import ModelParams
 
 from .crossval import CrossValidation, cross_validate
 from .identifiability import Identifiability, analyse
-from .recordings import Recording, RecordingError, load_recording
+from hopper_ros.recording.recordings import Recording, RecordingError, load_recording
 from .settings import FITTABLE, IdentificationSettings
 from .strides import Strides, extract_strides
 

@@ -142,7 +142,7 @@ def _validate(s: IdentificationSettings, source: str) -> None:
         raise ValueError(f"{source}: lanes needs 0 < step <= 0.002, duration_factor >= 1, 0 < fd_step < 0.1, "
                          f"max_iterations >= 1, polish_iterations >= 0, initial_radius > 0, batch_lanes >= 1; got {lanes}")
     if s.effects:
-        from .lanesfit import check_effects
+        from hopper_ros.config_schemas import check_effects
 
         try:
             check_effects(s.effects, s.fitted)

@@ -37,7 +37,7 @@ import numpy as np
 
 from hopper_ros.physics.exact import Phase
 
-from .recordings import LIFTOFF_EVENT, TOUCHDOWN_EVENT, UNLABELLED, Recording
+from hopper_ros.recording.recordings import LIFTOFF_EVENT, TOUCHDOWN_EVENT, UNLABELLED, Recording
 
 
 @dataclass(frozen=True)

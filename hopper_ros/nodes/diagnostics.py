@@ -70,13 +70,10 @@ def diagnostic_array(stamp, statuses: Iterable) -> Any:
     """A DiagnosticArray stamped `stamp` (builtin_interfaces/Time, or seconds since the epoch)."""
     from diagnostic_msgs.msg import DiagnosticArray
 
+    from hopper_ros.nodes.stamps import to_stamp
+
     array = DiagnosticArray()
-    if isinstance(stamp, (int, float)):
-        seconds = math.floor(stamp)
-        array.header.stamp.sec = int(seconds)
-        array.header.stamp.nanosec = min(int(round((stamp - seconds) * 1e9)), 999_999_999)
-    else:
-        array.header.stamp = stamp
+    array.header.stamp = to_stamp(stamp) if isinstance(stamp, (int, float)) else stamp
     array.status = list(statuses)
     return array
 

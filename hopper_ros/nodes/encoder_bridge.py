@@ -29,16 +29,15 @@ import sys
 import threading
 import time
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 from hopper_ros.config_schemas import load_hardware
 from hopper_ros.msg import BodyMeasurement, EncoderSample
-from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.common import read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.sensing.bridge import MALFORMED, ORDER, EncoderBridge
 from hopper_ros.sensing.config import load_sensing_config
-from hopper_ros.sensing.messages import (CounterDeltas, any_of, fill_body_measurement,
+from hopper_ros.nodes.sensing_messages import (CounterDeltas, any_of, fill_body_measurement,
                                          fill_encoder_sample, sample_qos)
 
 RECEIVE_TIMEOUT = 0.2     # [s] the receiving thread checks for shutdown this often
@@ -49,8 +48,7 @@ class EncoderBridgeNode(Node):
     def __init__(self, **node_kwargs):
         node_kwargs.setdefault("start_parameter_services", False)   # read-only parameters, fewer entities
         super().__init__("encoder_bridge", **node_kwargs)
-        param = lambda name, default, text: self.declare_parameter(  # noqa: E731
-            name, default, ParameterDescriptor(description=text, read_only=True)).value
+        param = read_only_parameters(self)
         config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
         hardware = load_hardware(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
                              config.hardware_file)

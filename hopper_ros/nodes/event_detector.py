@@ -23,16 +23,15 @@ from __future__ import annotations
 
 import time
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 from hopper_ros.msg import ApexState, BodyState, GaitEvent
-from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.common import read_only_parameters, run_node
 from hopper_ros.config_schemas import load_model
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.sensing.events import EventDetector
-from hopper_ros.sensing.messages import (CounterDeltas, any_of, apex_state_msg,
+from hopper_ros.nodes.sensing_messages import (CounterDeltas, any_of, apex_state_msg,
                                          estimate_from_msg, gait_event_msg, sample_qos, to_seconds)
 from hopper_ros.sensing.samples import EventType
 
@@ -43,8 +42,7 @@ class EventDetectorNode(Node):
     def __init__(self, **node_kwargs):
         node_kwargs.setdefault("start_parameter_services", False)
         super().__init__("event_detector", **node_kwargs)
-        param = lambda name, default, text: self.declare_parameter(  # noqa: E731
-            name, default, ParameterDescriptor(description=text, read_only=True)).value
+        param = read_only_parameters(self)
         config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
         model_file = param("model_file", "", "model parameters (YAML), '' = the sensing file's") or config.model_file
         period = param("diagnostics_period", 0.0, "[s] diagnostics period (0 = sensing file)") or config.diagnostics_period

@@ -15,36 +15,28 @@ Parameters (read only, given at start: the node offers no parameter services):
   sync_period (double) [s]: SYNC period (default 0.001)
 
 On SIGINT/SIGTERM the drive is disabled (confirmed by the drive) before the node goes away. The
-logic lives in hopper_ros.motor_driver; this node only connects it to ROS.
+logic lives in hopper_ros.canbus.driver (the driver and its 1 kHz CycleLoop); this node only
+connects it to ROS.
 """
 
 from __future__ import annotations
 
 import sys
 import threading
-import time
 
-import can
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from hopper_ros.canbus.epos2_objects import State
-from hopper_ros.motor_driver import (
-    COUNTER_NAMES,
-    ERROR,
-    INFO,
-    WARN,
-    DriverSettings,
-    MotorDriver,
-    load_hardware,
-    load_section,
-    open_bus,
-)
+from hopper_ros.canbus.driver import (COUNTER_NAMES, ERROR, INFO, WARN, DriverSettings, MotorDriver, load_hardware,
+                                     load_section, select_transport)
+from hopper_ros.canbus.driver.bus import open_transport
+from hopper_ros.canbus.driver.cycle import CycleLoop
 from hopper_ros.msg import MotorCommand, MotorStatus
 from hopper_ros.nodes import diagnostics
-from hopper_ros.nodes.common import run_node, stop_requested
+from hopper_ros.nodes.common import read_only_parameters, run_node, stop_requested
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
+from hopper_ros.nodes.stamps import now_seconds, to_seconds
 
 #: commands: the latest one matters (a stale one is worse than none); matches reliable publishers too
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -72,24 +64,18 @@ class MotorDriverNode(Node):
         # measurably fewer commands overtaken before the executor takes them (bench_motor_driver).
         node_kwargs.setdefault("start_parameter_services", False)
         super().__init__("motor_driver", **node_kwargs)
-        read_only = lambda text: ParameterDescriptor(description=text, read_only=True)  # noqa: E731
-        config_file = self.declare_parameter("config_file", "motor_driver.yaml", read_only("driver settings (YAML)")).value
+        param = read_only_parameters(self)
+        config_file = param("config_file", "motor_driver.yaml", "driver settings (YAML)")
         section = load_section(config_file)
-        hardware_file = self.declare_parameter(
-            "hardware_file", str(section.get("hardware_file", "hardware.yaml")), read_only("hardware (YAML)")).value
-        bus_overrides = {name: self.declare_parameter(name, "", read_only(f"CAN {name} ('' = hardware file)")).value
+        hardware_file = param("hardware_file", str(section.get("hardware_file", "hardware.yaml")), "hardware (YAML)")
+        bus_overrides = {name: param(name, "", f"CAN {name} ('' = hardware file)")
                          for name in ("interface", "channel", "host")}
-        bus_overrides["port"] = self.declare_parameter("port", 0, read_only("CAN socketcand port (0 = hardware file)")).value
-        command_timeout = self.declare_parameter(
-            "command_timeout", float(section.get("command_timeout", DriverSettings.command_timeout)),
-            read_only("[s] no command this long: quick stop, then disable")).value
-        sync_period = self.declare_parameter(
-            "sync_period", float(section.get("sync_period", DriverSettings.sync_period)), read_only("[s] SYNC period")).value
-        self._status_period = float(section.get("status_period", 0.1))
-        self._status_decimation = max(1, int(self.declare_parameter(
-            "status_decimation", int(section.get("status_decimation", 1)),
-            read_only("motor_status on every Nth TPDO set (1: every SYNC)")).value))
-        self._tpdo_sets = 0
+        bus_overrides["port"] = param("port", 0, "CAN socketcand port (0 = hardware file)")
+        command_timeout = param("command_timeout", float(section.get("command_timeout", DriverSettings.command_timeout)),
+                                "[s] no command this long: quick stop, then disable")
+        sync_period = param("sync_period", float(section.get("sync_period", DriverSettings.sync_period)), "[s] SYNC period")
+        status_decimation = param("status_decimation", int(section.get("status_decimation", 1)),
+                                  "motor_status on every Nth TPDO set (1: every SYNC)")
         diagnostics_period = float(section.get("diagnostics_period", 0.5))
         settings = DriverSettings.from_mapping(section, command_timeout=command_timeout, sync_period=sync_period)
         hardware = load_hardware(hardware_file)
@@ -98,25 +84,20 @@ class MotorDriverNode(Node):
         # while a callback runs (the default switch interval is 5 ms).
         sys.setswitchinterval(min(sys.getswitchinterval(), settings.sync_period / 4))
         self._lock = threading.Lock()
-        self._bus = open_bus(hardware.get("can", {}), cancelled=stop_requested, **bus_overrides)
+        transport = select_transport(hardware.get("can", {}), **bus_overrides)
+        self._bus = open_transport(transport, cancelled=stop_requested)
         try:
             self._driver = MotorDriver(self._bus, hardware, settings)
         except Exception:
             self._bus.shutdown()
             raise
         self._status_pub = self.create_publisher(MotorStatus, "motor_status", 10)
-        bus = hardware.get("can", {})
-        self._diagnostics = DiagnosticsReporter(
-            self, f"EPOS2 node {self._driver.node_id} on CAN {bus_overrides.get('interface') or bus.get('interface', '')}")
+        self._diagnostics = DiagnosticsReporter(self, f"EPOS2 node {self._driver.node_id} on CAN {transport.interface}")
         self.create_subscription(MotorCommand, "motor_command", self._on_command, COMMAND_QOS)
+        self._loop = CycleLoop(self._driver, self._lock, self._log, self._publish_status, self.get_logger().error,
+                               status_decimation, float(section.get("status_period", 0.1)))
         self.create_timer(diagnostics_period, self._publish_diagnostics)
-        self._last_status = 0.0
-        self._cycles = 0
-        self._overruns = 0
-        self._started = time.monotonic()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="can-cycle", daemon=True)
-        self._thread.start()
+        self._loop.start()
         self.get_logger().info(
             f"motor driver on {self._bus.channel_info}: drive node {self._driver.node_id}, SYNC every "
             f"{settings.sync_period * 1e3:g} ms, command timeout {settings.command_timeout * 1e3:g} ms")
@@ -126,8 +107,7 @@ class MotorDriverNode(Node):
     def _on_command(self, msg: MotorCommand) -> None:
         age = 0.0
         if msg.mode == MotorCommand.MODE_RAMP:   # the ramp started at the stamp (touchdown), on the host clock
-            stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-            age = self.get_clock().now().nanoseconds * 1e-9 - stamp
+            age = now_seconds(self) - to_seconds(msg.header.stamp)
         with self._lock:
             self._driver.command(msg.mode, msg.setpoint, msg.duration, age)
 
@@ -144,7 +124,6 @@ class MotorDriverNode(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.header.frame_id = "hip"
         self._status_pub.publish(msg)
-        self._last_status = time.monotonic()
 
     def _publish_diagnostics(self) -> None:
         with self._lock:
@@ -152,10 +131,9 @@ class MotorDriverNode(Node):
             counters = [self._driver.counters[name] for name in COUNTER_NAMES]
             status = self._driver.status
             values = [self._driver.settings.command_timeout, status.current, status.position]
-        elapsed = max(time.monotonic() - self._started, 1e-9)
         self._diagnostics.report(
-            {**dict(zip(COUNTER_NAMES, counters)), "cycle_overruns": self._overruns},
-            dict(zip(["command_timeout_s", "current_a", "position_rad", "cycle_rate_hz"], [*values, self._cycles / elapsed])),
+            {**dict(zip(COUNTER_NAMES, counters)), "cycle_overruns": self._loop.overruns},
+            dict(zip(["command_timeout_s", "current_a", "position_rad", "cycle_rate_hz"], [*values, self._loop.rate])),
             message, {INFO: diagnostics.OK, WARN: diagnostics.WARN, ERROR: diagnostics.ERROR}[level])
 
     def _log(self, events) -> None:
@@ -172,72 +150,12 @@ class MotorDriverNode(Node):
         if problem:
             self._publish_diagnostics()
 
-    # ------------------------------------------------------------------ the CAN cycle
-
-    def _run(self) -> None:
-        driver, bus = self._driver, self._bus
-        period = driver.settings.sync_period
-        next_cycle = time.monotonic()
-        while not self._stop.is_set():
-            try:
-                with self._lock:
-                    driver.cycle()
-                    events = driver.drain_events()
-                self._cycles += 1
-                self._log(events)
-                next_cycle += period
-                if time.monotonic() - next_cycle > 5 * period:   # fell behind: skip, do not burst
-                    self._overruns += 1
-                    next_cycle = time.monotonic()
-                while not self._stop.is_set():
-                    now = time.monotonic()
-                    remaining = next_cycle - now
-                    if remaining <= 0:
-                        break
-                    with self._lock:
-                        deadline = driver.watchdog_deadline()
-                    if deadline <= now:                 # the command stream stopped: act now,
-                        with self._lock:                #   not at the next cycle
-                            driver.watchdog()
-                            events = driver.drain_events()
-                        self._log(events)
-                        continue
-                    remaining = min(remaining, deadline - now + 1e-4)
-                    try:
-                        frame = bus.recv(timeout=remaining)
-                    except (can.CanError, OSError, ValueError) as exc:
-                        with self._lock:
-                            driver.bus_error(f"receive failed: {exc}")
-                        time.sleep(max(0.0, next_cycle - time.monotonic()))
-                        break
-                    if frame is None:
-                        continue
-                    with self._lock:
-                        fresh = driver.handle(frame)
-                    if fresh:
-                        self._tpdo_sets += 1
-                        if self._tpdo_sets % self._status_decimation == 0:
-                            self._publish_status()
-                if time.monotonic() - self._last_status > self._status_period:
-                    self._publish_status()
-            except Exception as exc:  # noqa: BLE001 - the cycle must go on (the drive's consumer is the backstop)
-                self.get_logger().error(f"CAN cycle: {type(exc).__name__}: {exc}")
-                time.sleep(period)
-
     def destroy_node(self):
         """Disable the drive (and confirm it) before the node goes away."""
-        if self._thread.is_alive():
-            self._stop.set()
-            self._thread.join(2.0)
-        with self._lock:
-            confirmed = self._driver.shutdown()
-            events = self._driver.drain_events()
-        self._log(events)
-        if confirmed:
+        if self._loop.close():
             self.get_logger().info("drive disabled (confirmed by the drive)")
         else:
             self.get_logger().error("drive NOT confirmed disabled")
-        self._bus.shutdown()
         return super().destroy_node()
 
 

@@ -17,13 +17,13 @@ The schedule logic lives in hopper_ros.setpoints; this node only connects it to 
 
 from __future__ import annotations
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from hopper_ros.msg import ApexState
-from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.common import read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import OK, DiagnosticsReporter
+from hopper_ros.nodes.stamps import now_seconds
 from hopper_ros.setpoints import ScheduleRunner, load_schedule
 
 DEFAULT_SCHEDULE = "setpoints/fig5_5.yaml"
@@ -44,12 +44,7 @@ SETPOINT_QOS = QoSProfile(
 class SetpointScheduler(Node):
     def __init__(self, **node_kwargs):
         super().__init__("setpoint_scheduler", **node_kwargs)
-        self.declare_parameter(
-            "schedule_file",
-            DEFAULT_SCHEDULE,
-            ParameterDescriptor(description="apex setpoint schedule (YAML)", read_only=True),
-        )
-        schedule_file = self.get_parameter("schedule_file").value
+        schedule_file = read_only_parameters(self)("schedule_file", DEFAULT_SCHEDULE, "apex setpoint schedule (YAML)")
         self._runner = ScheduleRunner(load_schedule(schedule_file), self._now())
         self._stride_index = 0
         self._timer = None
@@ -66,7 +61,7 @@ class SetpointScheduler(Node):
         self._publish()
 
     def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+        return now_seconds(self)
 
     def _on_apex(self, msg: ApexState) -> None:
         self._stride_index = msg.stride_index

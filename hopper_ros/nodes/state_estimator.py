@@ -24,16 +24,15 @@ from __future__ import annotations
 import math
 import time
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 from hopper_ros.config_schemas import load_hardware
 from hopper_ros.msg import BodyMeasurement, BodyState
-from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.common import read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.sensing.estimator import StateEstimator
-from hopper_ros.sensing.messages import (CounterDeltas, any_of, fill_body_state,
+from hopper_ros.nodes.sensing_messages import (CounterDeltas, any_of, fill_body_state,
                                          measurement_from_msg, sample_qos)
 
 PROBLEM_COUNTERS = ("predicted_samples", "outliers_y", "outliers_z", "outliers_leg_angle", "reinitialisations",
@@ -44,8 +43,7 @@ class StateEstimatorNode(Node):
     def __init__(self, **node_kwargs):
         node_kwargs.setdefault("start_parameter_services", False)
         super().__init__("state_estimator", **node_kwargs)
-        param = lambda name, default, text: self.declare_parameter(  # noqa: E731
-            name, default, ParameterDescriptor(description=text, read_only=True)).value
+        param = read_only_parameters(self)
         config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
         hardware = load_hardware(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
                              config.hardware_file)

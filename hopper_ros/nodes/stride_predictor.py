@@ -17,28 +17,23 @@ from __future__ import annotations
 
 import math
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
-from rclpy.time import Time
 
 from hopper_ros.msg import ApexState, StrideCommand
-from hopper_ros.nodes.common import run_node
+from hopper_ros.nodes.common import read_only_parameters, run_node
 from hopper_ros.config_schemas import load_model
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
+from hopper_ros.nodes.stamps import to_seconds, to_stamp
 from hopper_ros.physics.predictors import DEFAULT_PREDICTOR
 from hopper_ros.stride_monitor import Apex, Command, StrideMonitor
-
-
-def _seconds(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
 
 
 class StridePredictor(Node):
     def __init__(self, **node_kwargs):
         super().__init__("stride_predictor", **node_kwargs)
-        read_only = lambda text: ParameterDescriptor(description=text, read_only=True)
-        model_file = self.declare_parameter("model_file", "model.yaml", read_only("model parameters (YAML)")).value
-        method = self.declare_parameter("predictor", DEFAULT_PREDICTOR, read_only("corrected, aas or exact")).value
+        param = read_only_parameters(self)
+        model_file = param("model_file", "model.yaml", "model parameters (YAML)")
+        method = param("predictor", DEFAULT_PREDICTOR, "corrected, aas or exact")
         self._monitor = StrideMonitor(load_model(model_file), method)
         self._predicted = self.create_publisher(ApexState, "predicted_apex", 10)
         self._diagnostics = DiagnosticsReporter(self)
@@ -49,7 +44,7 @@ class StridePredictor(Node):
         self.get_logger().info(f"predicting strides with the {method} predictor, model {model_file}")
 
     def _on_apex(self, msg: ApexState) -> None:
-        apex = Apex(msg.stride_index, _seconds(msg.header.stamp), msg.y, msg.apex_height, msg.forward_speed)
+        apex = Apex(msg.stride_index, to_seconds(msg.header.stamp), msg.y, msg.apex_height, msg.forward_speed)
         score, prediction = self._monitor.on_apex(apex)
         if score is not None:
             self.get_logger().info(
@@ -70,7 +65,7 @@ class StridePredictor(Node):
             self._report(f"stride {prediction.stride_index - 1}: {prediction.failure}")
             return
         msg = ApexState()
-        msg.header.stamp = Time(nanoseconds=int(round(prediction.time * 1e9))).to_msg()
+        msg.header.stamp = to_stamp(prediction.time)
         msg.header.frame_id = "ground"
         msg.stride_index = prediction.stride_index
         msg.apex_height, msg.forward_speed, msg.y = prediction.apex_height, prediction.forward_speed, prediction.y

@@ -1,28 +1,20 @@
 """The hip motor driver: CANopen master of the maxon EPOS2, as plain Python (no ROS).
 
 `MotorDriver(bus, hardware, settings, clock)` owns one python-can bus and one drive (node id from
-config/hardware.yaml). The caller drives it:
+config/hardware.yaml). The caller drives it (`cycle.CycleLoop` does, for the node):
 
 - `cycle()` once per `settings.sync_period` (1 ms): timeouts (SDO, heartbeat, command watchdog),
   the start-up sequence, the CiA 402 controlword, the RPDO and the SYNC, our own heartbeat;
 - `handle(frame)` for every received frame (TPDOs, SDO answers, EMCY, heartbeats); never raises:
   a malformed frame is counted (`counters["malformed_frames"]`) and ignored;
 - `command(mode, setpoint)` for each motor command (MotorCommand.MODE_*: 0 disabled, 1 hip
-  torque [N m], 2 leg angle [rad]); the RPDO goes out at once when the drive is running;
+  torque [N m], 2 leg angle [rad], 3 the stance ramp); the RPDO goes out at once when the drive
+  is running;
 - `shutdown()` at the end: power stage off (confirmed by the drive), our heartbeat consumer in the
   drive switched off, NMT pre-operational. It pumps the bus itself.
 
-Start-up (non-blocking, one SDO at a time): NMT pre-operational, controlword "disable voltage",
-device type check, the drive's last error code, heartbeat producer (0x1017) and consumer of our
-heartbeat (0x1016: the drive faults by itself if this process dies), current limits (0x6410),
-position regulator gains (0x60FB), operating mode, the PDO layout below, NMT start.
-
-PDOs (RPDOs event-driven so a command acts when it arrives; TPDOs on every SYNC):
-  RPDO1 controlword, modes of operation, current mode setting value [mA]    (current and disabled)
-  RPDO2 controlword, modes of operation, position mode setting value [qc]   (position)
-  TPDO1 statusword, position actual value [qc], current actual value [mA]
-  TPDO2 velocity actual value [rpm], modes of operation display, error code
-Exactly one RPDO per SYNC period unless commands arrive faster.
+The start-up sequence and the PDO layout: `startup.py`; the CiA 402 walk: `cia402.py`; units:
+`units.py`. Exactly one RPDO per SYNC period unless commands arrive faster.
 
 Safety: the drive is enabled only while valid commands keep arriving (`command_timeout`; a stale
 stream ends with the current setpoint zeroed and a quick stop in the same RPDO, then disable
@@ -35,12 +27,10 @@ stream acknowledged it with a disable command. Units: SI at this module's edges,
 
 from __future__ import annotations
 
-import logging
 import math
-import socket
 import struct
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from enum import Enum
 from typing import Any, Callable, Mapping
 
@@ -51,8 +41,6 @@ from hopper_ros.canbus.epos2_objects import Command, NmtCommand, NmtState, Opera
 from hopper_ros.canbus.master import (
     HeartbeatConsumer,
     MalformedFrame,
-    PdoEntry,
-    PdoMapping,
     SdoClient,
     SdoError,
     SdoTransfer,
@@ -62,47 +50,17 @@ from hopper_ros.canbus.master import (
     nmt_state_name,
     sync_frame,
 )
-from hopper_ros.hardware.encoders import Encoder
-from hopper_ros.hardware.motor import RPM_PER_RAD_S, HipMotor
+from hopper_ros.physics.laws import ramp_torque
 
-# MotorCommand modes (the message's constants, repeated here to stay ROS-free)
-MODE_DISABLED, MODE_CURRENT, MODE_POSITION, MODE_RAMP = 0, 1, 2, 3
-MODE_NAMES = {MODE_DISABLED: "disabled", MODE_CURRENT: "current", MODE_POSITION: "position", MODE_RAMP: "ramp"}
+from . import cia402, startup
+from .cia402 import DISABLED_STATES, FAULT_STATES, FaultReset
+from .settings import (COUNTER_NAMES, ERROR, INFO, MODE_CURRENT, MODE_DISABLED, MODE_NAMES, MODE_POSITION, MODE_RAMP,
+                       WARN, DriveConfig, DriverSettings)
+from .startup import RPDO_MAPPINGS, TPDO_MAPPINGS
+from .units import DriveUnits
+
 RAMP_RESTAMP = 0.0005   # [s] a MODE_RAMP stamp moved by more than this re-anchors the running ramp (repeats of
                         #   one stamp differ by the command's transit jitter only)
-
-# ------------------------------------------------------------------------------- PDO layout
-
-_CW = PdoEntry(eo.CONTROLWORD, 0, 16, False, "controlword")
-_MODE = PdoEntry(eo.MODES_OF_OPERATION, 0, 8, True, "modes_of_operation")
-RPDO_MAPPINGS: dict[int, PdoMapping] = {
-    1: PdoMapping.of([_CW, _MODE, PdoEntry(eo.CURRENT_MODE_SETTING_VALUE, 0, 16, True, "current_setting_mA")]),
-    2: PdoMapping.of([_CW, _MODE, PdoEntry(eo.POSITION_MODE_SETTING_VALUE, 0, 32, True, "position_setting_qc")]),
-}
-TPDO_MAPPINGS: dict[int, PdoMapping] = {
-    1: PdoMapping.of([PdoEntry(eo.STATUSWORD, 0, 16, False, "statusword"),
-                      PdoEntry(eo.POSITION_ACTUAL_VALUE, 0, 32, True, "position_qc"),
-                      PdoEntry(eo.CURRENT_ACTUAL_VALUE, 0, 16, True, "current_mA")]),
-    2: PdoMapping.of([PdoEntry(eo.VELOCITY_ACTUAL_VALUE, 0, 32, True, "velocity_rpm"),
-                      PdoEntry(eo.MODES_OF_OPERATION_DISPLAY, 0, 8, True, "modes_of_operation_display"),
-                      PdoEntry(eo.ERROR_CODE, 0, 16, False, "error_code")]),
-}
-RPDO_TRANSMISSION = eo.TRANSMISSION_EVENT   # 255: applied on reception
-TPDO_TRANSMISSION = 1                       # sent after every SYNC
-
-# CiA 402 states with the power stage off: what "disabled" means for this driver
-DISABLED_STATES = frozenset({State.START, State.NOT_READY_TO_SWITCH_ON, State.SWITCH_ON_DISABLED,
-                             State.READY_TO_SWITCH_ON, State.FAULT})
-FAULT_STATES = frozenset({State.FAULT, State.FAULT_REACTION_ACTIVE_DISABLED, State.FAULT_REACTION_ACTIVE_ENABLED})
-
-COUNTER_NAMES = (
-    "frames_sent", "frames_received", "sync_sent", "tpdo_received", "tpdo_missed",
-    "commands_received", "commands_rejected", "current_clamped", "malformed_frames",
-    "sdo_aborts", "sdo_timeouts", "bus_errors", "emcy_received", "faults", "fault_resets",
-    "watchdog_stops", "heartbeat_losses", "drive_bootups", "startup_failures",
-)
-
-INFO, WARN, ERROR = 0, 1, 2   # event / health levels (DiagnosticStatus OK, WARN, ERROR)
 
 
 class Phase(str, Enum):
@@ -111,99 +69,6 @@ class Phase(str, Enum):
     FAILED = "failed"           # start-up failed; retried after settings.startup_retry
     SHUTTING_DOWN = "shutting_down"
     STOPPED = "stopped"
-
-
-#: keys of the config section that are the node's, not the driver's
-NODE_KEYS = frozenset({"hardware_file", "status_period", "status_decimation", "diagnostics_period"})
-
-
-@dataclass(frozen=True)
-class DriverSettings:
-    """Timing and safety settings (config/motor_driver.yaml, section `motor_driver`)."""
-
-    sync_period: float = 0.001          # [s] SYNC / PDO exchange period
-    rpdo_refresh: float = 0.01          # [s] an unchanged RPDO is sent again this often (else every change)
-    max_ramp_age: float = 0.005         # [s] MODE_RAMP: a ramp command older than this starts this far back
-    command_timeout: float = 0.01       # [s] no valid command this long: current 0, quick stop, then disable
-    quick_stop_time: float = 0.001      # [s] quick stop at most this long after the watchdog tripped, then
-                                        #   disable voltage (at once when the drive reports QUICK STOP ACTIVE)
-    heartbeat_timeout: float = 0.3      # [s] drive heartbeat missing this long: lost
-    master_node_id: int = 0x7F          # our heartbeat's node id (COB-ID 0x700 + id)
-    master_heartbeat_period: float = 0.02  # [s] our heartbeat; 0: none
-    drive_consumer_time: float = 0.2    # [s] the drive faults if our heartbeat stops this long; 0: off
-    sdo_timeout: float = 0.05           # [s]
-    startup_retry: float = 0.2          # [s] wait before a failed start-up is retried
-    bus_error_holdoff: float = 0.1      # [s] drive kept disabled after a bus error
-    fault_reset_attempts: int = 3       # fault reset edges per acknowledgement
-    fault_reset_interval: float = 0.02  # [s] between fault reset edges
-    shutdown_timeout: float = 0.5       # [s] bound on shutdown()
-
-    def __post_init__(self) -> None:
-        from hopper_ros.config_schemas import MOTOR_DRIVER_SECTION
-        from hopper_ros.schema import validate
-
-        validate(MOTOR_DRIVER_SECTION, {f.name: getattr(self, f.name) for f in fields(self)}, "motor_driver")
-
-    @classmethod
-    def from_mapping(cls, section: Mapping[str, Any], source: str = "motor_driver", **overrides: Any) -> "DriverSettings":
-        """Settings from a `motor_driver` section (validated by its schema) and overrides (node parameters)."""
-        from hopper_ros.config_schemas import MOTOR_DRIVER_SECTION
-        from hopper_ros.schema import validate
-
-        merged = {**dict(section), **{k: v for k, v in overrides.items() if v is not None}}
-        checked = validate(MOTOR_DRIVER_SECTION, merged, source)
-        known = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in checked.items() if k in known})
-
-
-def load_section(name: str = "motor_driver.yaml") -> dict[str, Any]:
-    """The `motor_driver` section of a config file (driver settings plus the NODE_KEYS), validated."""
-    from hopper_ros.config_schemas import MOTOR_DRIVER
-    from hopper_ros.schema import load_config
-
-    return dict(load_config(name, MOTOR_DRIVER)["motor_driver"])
-
-
-CONNECT_TIMEOUT = 30.0   # [s] for a socketcand server to accept (the simulated robot may start later)
-
-
-def wait_for_server(host: str, port: int, timeout: float, cancelled: Callable[[], bool] = lambda: False) -> None:
-    """Wait until a TCP server accepts on host:port (python-can's own retry spins a core for 10 s)."""
-    end = time.monotonic() + timeout
-    while not cancelled():
-        try:
-            socket.create_connection((host, port), timeout=1.0).close()
-            return
-        except OSError as exc:
-            if time.monotonic() > end:
-                raise OSError(f"no CAN server (socketcand) accepts on {host}:{port} after {timeout:.0f} s: {exc}") from None
-            time.sleep(0.1)
-    raise InterruptedError(f"stopped while waiting for the CAN server on {host}:{port}")
-
-
-def open_bus(can_config: Mapping[str, Any], cancelled: Callable[[], bool] = lambda: False, **overrides: Any) -> can.BusABC:
-    """A python-can bus from the `can:` section of hardware.yaml (values in `overrides` win).
-
-    socketcan (robot: can0), socketcand (the simulated robot's loopback hub: host, port), virtual
-    (one process). udp_multicast is refused: its packets leave the machine.
-    """
-    cfg = dict(can_config)
-    cfg.update({k: v for k, v in overrides.items() if v not in (None, "", 0)})
-    interface = str(cfg.get("interface", ""))
-    channel = cfg.get("channel")
-    if interface == "udp_multicast":
-        raise ValueError("CAN interface udp_multicast is not allowed (it leaves loopback)")
-    if interface == "socketcand":
-        # python-can warns on every frame split across two TCP reads, a normal event: not ours to log
-        logging.getLogger("can.interfaces.socketcand").setLevel(logging.ERROR)
-        host, port = str(cfg["host"]), int(cfg["port"])
-        wait_for_server(host, port, float(cfg.get("connect_timeout", CONNECT_TIMEOUT)), cancelled)
-        return can.Bus(interface=interface, channel=channel, host=host, port=port, tcp_tune=True)
-    if interface in ("socketcan", "virtual"):
-        return can.Bus(interface=interface, channel=channel)
-    if not interface:
-        raise ValueError("CAN config lacks `interface`")
-    return can.Bus(interface=interface, channel=channel, bitrate=int(cfg.get("bitrate", 1000000)))
 
 
 @dataclass
@@ -232,25 +97,17 @@ class DriveStatus:
 class MotorDriver:
     """CANopen master of one EPOS2 (see the module docstring). Not thread-safe: one caller at a time."""
 
-    def __init__(self, bus: can.BusABC, hardware: Mapping[str, Any], settings: DriverSettings = DriverSettings(),
-                 clock: Callable[[], float] = time.monotonic):
+    def __init__(self, bus: can.BusABC, hardware: Mapping[str, Any] | DriveConfig,
+                 settings: DriverSettings = DriverSettings(), clock: Callable[[], float] = time.monotonic):
         self.bus = bus
         self.settings = settings
         self.clock = clock
-        self.motor = HipMotor.from_config(hardware)
-        try:
-            drive = hardware["drive"]
-            self.encoder = Encoder.from_config("motor", hardware["encoders"]["motor"])
-            self.node_id = int(drive["node_id"])
-            self.continuous_current = float(drive["continuous_current"])
-            gains = drive["position_gains"]
-            self.position_gains = (int(gains["p"]), int(gains["i"]), int(gains["d"]))
-            self.heartbeat_period = float(drive["heartbeat_period"])
-        except KeyError as exc:
-            raise ValueError(f"hardware config lacks {exc.args[0]!r} (drive: / encoders.motor:)") from None
-        self.current_limit = self.motor.current_limit
-        if not 0 < self.continuous_current <= self.current_limit:
-            raise ValueError("hardware config: drive.continuous_current must be in (0, current_limit]")
+        self.drive = hardware if isinstance(hardware, DriveConfig) else DriveConfig.from_hardware(hardware)
+        self.units = DriveUnits(self.drive)
+        self.motor, self.encoder = self.drive.motor, self.drive.encoder
+        self.node_id = self.drive.node_id
+        self.current_limit = self.drive.current_limit
+        self.heartbeat_period = self.drive.heartbeat_period
         if not 0 < self.heartbeat_period < settings.heartbeat_timeout:
             raise ValueError("drive.heartbeat_period must be positive and below the heartbeat timeout")
         eo.tpdo_cob_id(1, self.node_id)  # validates the node id
@@ -284,10 +141,8 @@ class MotorDriver:
         self._quick_stop = False
         self._watchdog_at = -math.inf       # when the command watchdog last tripped
         self._bus_error_at: float | None = None
-        self._reset_armed = True            # a fault found at start-up is reset
-        self._reset_edges = 0
-        self._reset_edge_at = -math.inf
-        self._last_cw: int | None = None
+        self._reset = FaultReset(settings.fault_reset_attempts, settings.fault_reset_interval)   # armed: a
+        self._last_cw: int | None = None                                  # fault found at start-up is reset
         # cyclic exchange
         self._sent_since_sync: tuple[int, bytes] | None = None
         self._ramp: tuple[float, float, float, float] | None = None   # MODE_RAMP: (tau_0, duration, start, stamp)
@@ -328,8 +183,8 @@ class MotorDriver:
         if mode == MODE_DISABLED:
             self._want_enabled = False
             self._quick_stop = False
-            if self.status.state in FAULT_STATES and not self._reset_armed:
-                self._reset_armed, self._reset_edges = True, 0   # the command stream acknowledges the fault
+            if self.status.state in FAULT_STATES and not self._reset.armed:
+                self._reset.arm()                       # the command stream acknowledges the fault
         else:
             self._want_enabled, self._quick_stop = True, False
             if mode == MODE_CURRENT:
@@ -477,14 +332,8 @@ class MotorDriver:
         self._want_enabled, self._quick_stop = False, False
         self._shutdown_confirmed = False
         self.phase = Phase.SHUTTING_DOWN
-        self._steps = [("pdo_disable", self.clock() + 0.05)] if was_running else []
-        self._steps += [
-            ("download", eo.CONTROLWORD, 0, "<H", int(Command.DISABLE_VOLTAGE)),
-            ("upload", eo.STATUSWORD, 0, self._check_disabled),
-        ]
-        if self.settings.drive_consumer_time:
-            self._steps.append(("download", eo.CONSUMER_HEARTBEAT_TIME, 1, "<I", 0))
-        self._steps += [("nmt", NmtCommand.ENTER_PRE_OPERATIONAL), ("stopped",)]
+        self._steps = startup.shutdown_steps(self.clock() + 0.05 if was_running else None, self.settings,
+                                             self._check_disabled)
 
     @property
     def shutdown_confirmed(self) -> bool:
@@ -522,31 +371,24 @@ class MotorDriver:
 
     def current_for_torque(self, torque: float) -> tuple[float, bool]:
         """Motor current [A] for a hip torque [N m], clamped to the current limit; (current, clamped)."""
-        current = self.motor.current(torque)
-        limit = self.current_limit
-        if abs(current) > limit:
-            return math.copysign(limit, current), True
-        return current, False
+        return self.units.current_for_torque(torque)
 
     def _current_setting(self, torque: float) -> int:
-        current, clamped = self.current_for_torque(torque)
+        milliamps, clamped = self.units.current_setting(torque)
         if clamped:
             self.counters["current_clamped"] += 1
-        milliamps = round(current * 1000.0)
-        limit_ma = int(self.current_limit * 1000.0)     # the limit holds after rounding too
-        return max(-limit_ma, min(limit_ma, milliamps))
+        return milliamps
 
     def counts_for_angle(self, angle: float) -> int:
         """Motor encoder count [qc] at a leg angle [rad] (nearest count)."""
-        encoder = self.encoder
-        return encoder.offset_counts + round(encoder.direction * angle * encoder.counts_per_turn / (2.0 * math.pi))
+        return self.units.counts_for_angle(angle)
 
     def _position_setting(self, angle: float) -> int:
-        return max(-(1 << 31), min((1 << 31) - 1, self.counts_for_angle(angle)))
+        return self.units.position_setting(angle)
 
     def leg_rate_for_rpm(self, rpm: float) -> float:
         """Leg angular velocity [rad/s] for a motor speed [rpm] (inverse of HipMotor.motor_speed_rpm)."""
-        return rpm / (self.motor.gear_ratio * RPM_PER_RAD_S * self.motor.direction)
+        return self.units.leg_rate_for_rpm(rpm)
 
     # ================================================================== frames in
 
@@ -557,9 +399,9 @@ class MotorDriver:
         if state != status.state:
             self._on_state_change(status.state, state, now)
         status.stamp, status.statusword, status.state = now, statusword, state
-        status.position = self.encoder.angle(position)
+        status.position = self.units.angle(position)
         status.current = current_ma / 1000.0
-        status.torque = self.motor.torque(status.current)
+        status.torque = self.units.torque(status.current)
         status.commanded_mode = self._mode if (self._want_enabled and state is State.OPERATION_ENABLED) else MODE_DISABLED
         return self._tpdo_received(1)
 
@@ -629,16 +471,16 @@ class MotorDriver:
         self._event(INFO, f"drive state {old.value if old else 'UNKNOWN'} -> {new.value}")
         if new in FAULT_STATES and old not in FAULT_STATES:
             self.counters["faults"] += 1
-            self._reset_edges = 0
-            if old is not None or not self._reset_armed:
-                self._reset_armed = False    # a fault in operation waits for an acknowledgement
+            self._reset.edges = 0
+            if old is not None or not self._reset.armed:
+                self._reset.armed = False    # a fault in operation waits for an acknowledgement
             if not self.status.fault_code:
                 self._request_error_code()
             self._event(ERROR, "drive fault" + (f" 0x{self.status.fault_code:04X}: {self.status.fault_text}"
                                                 if self.status.fault_code else "") + ": drive disabled")
         elif old in FAULT_STATES and new not in FAULT_STATES:
             self.counters["fault_resets"] += 1
-            self._reset_armed, self._reset_edges = False, 0
+            self._reset.disarm()
             self._event(INFO, "drive fault reset")
 
     def _request_error_code(self) -> None:
@@ -680,41 +522,24 @@ class MotorDriver:
                 and not self._bus_error_recent(now))
 
     def _controlword(self, now: float) -> int:
-        """The controlword for this instant: CiA 402 transitions towards the target state."""
-        state = self.status.state
-        if state in FAULT_STATES:
-            return self._fault_reset_word(now) if state is State.FAULT and self.phase is Phase.RUNNING \
-                else Command.DISABLE_VOLTAGE
-        if self._want_enabled and self._enable_allowed(now):
-            if state in (State.START, State.NOT_READY_TO_SWITCH_ON, State.SWITCH_ON_DISABLED, None):
-                return Command.SHUTDOWN
-            if state is State.QUICK_STOP_ACTIVE:
-                return Command.DISABLE_VOLTAGE          # to SWITCH ON DISABLED, then up again
-            return Command.SWITCH_ON_AND_ENABLE         # READY, REFRESH, MEASURE INIT, SWITCHED ON, ENABLED
-        if (self._quick_stop and self._enable_allowed(now) and state is State.OPERATION_ENABLED
-                and now - self._watchdog_at < self.settings.quick_stop_time):
-            return Command.QUICK_STOP                   # until the drive reports it, briefly
-        return Command.DISABLE_VOLTAGE
+        """The controlword for this instant: CiA 402 transitions towards the target state (cia402)."""
+        allowed = self._enable_allowed(now)
+        return cia402.controlword(
+            self.status.state, enable=self._want_enabled and allowed,
+            quick_stop=self._quick_stop and allowed and now - self._watchdog_at < self.settings.quick_stop_time,
+            fault_reset=lambda: self._fault_reset_word(now) if self.phase is Phase.RUNNING else Command.DISABLE_VOLTAGE)
 
     def _fault_reset_word(self, now: float) -> int:
         """Rising edges of bit 7, `fault_reset_interval` apart, while a reset is armed."""
-        if not self._reset_armed:
-            return Command.DISABLE_VOLTAGE
-        if self._last_cw is not None and self._last_cw & Command.FAULT_RESET:
-            if now - self._reset_edge_at < self.settings.fault_reset_interval:
-                return Command.FAULT_RESET
-            return Command.DISABLE_VOLTAGE
-        if self._reset_edges >= self.settings.fault_reset_attempts:
-            self._reset_armed = False
-            self._event(ERROR, f"fault reset failed after {self._reset_edges} attempts: "
+        word, gave_up = self._reset.word(now, self._last_cw)
+        if gave_up:
+            self._event(ERROR, f"fault reset failed after {self._reset.edges} attempts: "
                                "command disable to try again", key="reset_failed")
-            return Command.DISABLE_VOLTAGE
-        return Command.FAULT_RESET
+        return word
 
     def _ramp_torque(self, now: float) -> float:
         tau_0, duration, start, _ = self._ramp
-        elapsed = now - start
-        return -tau_0 * (1.0 - elapsed / duration) if 0.0 <= elapsed < duration else 0.0   # (2.32)
+        return ramp_torque(float(now - start), float(tau_0), float(duration))   # (2.32)
 
     def _rpdo_frame(self, number: int, controlword: int) -> can.Message:
         if number == 1:
@@ -736,9 +561,7 @@ class MotorDriver:
                 key == self._last_rpdo and now - self._last_rpdo_time < self.settings.rpdo_refresh)):
             return          # this period's RPDO is out already, or the drive has it (applied on reception)
         if self._send(frame):
-            if controlword & Command.FAULT_RESET and not (self._last_cw or 0) & Command.FAULT_RESET:
-                self._reset_edges += 1
-                self._reset_edge_at = now
+            self._reset.sent(controlword, self._last_cw, now)
             self._last_cw = controlword
             self._sent_since_sync = key
             self._last_rpdo, self._last_rpdo_time = key, now
@@ -750,42 +573,9 @@ class MotorDriver:
         self._startup_answered = False
         self.phase = Phase.STARTING
         self._sync_outstanding = False
-        self._reset_armed, self._reset_edges = True, 0
+        self._reset.arm()
         self.status.state = None
-        ms = lambda seconds: max(1, round(seconds * 1000.0))  # noqa: E731
-        steps: list[tuple] = [
-            ("nmt", NmtCommand.ENTER_PRE_OPERATIONAL),
-            ("download", eo.CONTROLWORD, 0, "<H", int(Command.DISABLE_VOLTAGE)),
-            ("upload", eo.DEVICE_TYPE, 0, self._check_device_type),
-            ("upload", eo.ERROR_CODE, 0, self._record_error_code),
-            ("download", eo.PRODUCER_HEARTBEAT_TIME, 0, "<H", ms(self.heartbeat_period)),
-            ("download", eo.CONSUMER_HEARTBEAT_TIME, 1, "<I",
-             (self.settings.master_node_id << 16 | ms(self.settings.drive_consumer_time))
-             if self.settings.drive_consumer_time else 0),
-            ("download", eo.MOTOR_DATA, eo.MOTOR_CONTINUOUS_CURRENT_LIMIT_SUB, "<H", round(self.continuous_current * 1000)),
-            ("download", eo.MOTOR_DATA, eo.MOTOR_OUTPUT_CURRENT_LIMIT_SUB, "<H", round(self.current_limit * 1000)),
-        ]
-        for sub, gain in zip((eo.GAIN_P_SUB, eo.GAIN_I_SUB, eo.GAIN_D_SUB), self.position_gains):
-            steps.append(("download", eo.POSITION_CONTROL_PARAMETERS, sub, "<h", gain))
-        steps.append(("download", eo.MODES_OF_OPERATION, 0, "<b", int(OperationMode.CURRENT)))
-        for kind, comm, mapping_base, mappings, transmission in (
-                ("rpdo", eo.RPDO_COMMUNICATION, eo.RPDO_MAPPING, RPDO_MAPPINGS, RPDO_TRANSMISSION),
-                ("tpdo", eo.TPDO_COMMUNICATION, eo.TPDO_MAPPING, TPDO_MAPPINGS, TPDO_TRANSMISSION)):
-            cob_of = eo.rpdo_cob_id if kind == "rpdo" else eo.tpdo_cob_id
-            for number in range(1, eo.PDO_COUNT + 1):
-                cob = cob_of(number, self.node_id)
-                steps.append(("download", comm + number - 1, eo.PDO_COB_ID_SUB, "<I", cob | eo.COB_ID_INVALID_BIT))
-                mapping = mappings.get(number)
-                if mapping is None:
-                    continue                       # unused: stays disabled
-                steps.append(("download", comm + number - 1, eo.PDO_TRANSMISSION_TYPE_SUB, "<B", transmission))
-                steps.append(("download", mapping_base + number - 1, 0, "<B", 0))
-                for sub, entry in enumerate(mapping.entries, start=1):
-                    steps.append(("download", mapping_base + number - 1, sub, "<I", entry.mapping))
-                steps.append(("download", mapping_base + number - 1, 0, "<B", len(mapping.entries)))
-                steps.append(("download", comm + number - 1, eo.PDO_COB_ID_SUB, "<I", cob))
-        steps += [("nmt", NmtCommand.START), ("running",)]
-        self._steps = steps
+        self._steps = startup.startup_steps(self.drive, self.settings, self._check_device_type, self._record_error_code)
 
     def _advance(self, now: float) -> None:
         """Run the sequence's steps until one waits for the drive (an SDO in flight)."""
@@ -871,9 +661,7 @@ class MotorDriver:
             self._event(ERROR, f"drive start-up failed: {reason}; retrying every {self.settings.startup_retry:g} s")
 
     def _check_device_type(self, transfer: SdoTransfer) -> None:
-        device_type = transfer.value("<I")
-        if device_type & 0xFFFF != eo.DEVICE_TYPE_VALUE & 0xFFFF:
-            raise ValueError(f"node {self.node_id} is not a CiA 402 drive (device type 0x{device_type:08X})")
+        startup.check_device_type(self.node_id, transfer)
 
     def _record_error_code(self, transfer: SdoTransfer) -> None:
         code = transfer.value("<H")
@@ -909,9 +697,3 @@ class MotorDriver:
         events, self.events = self.events, []
         return events
 
-
-def load_hardware(name: str = "hardware.yaml") -> Mapping[str, Any]:
-    """config/hardware.yaml (or a variant), validated by its schema (hopper_ros.config_schemas)."""
-    from hopper_ros.config_schemas import load_hardware as load
-
-    return load(name)

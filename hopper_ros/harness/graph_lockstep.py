@@ -2,10 +2,11 @@
 
 Per 1 ms period, the same modules the nodes wrap, in the order the data flows:
 sim_robot (SimRobot with its emulated EPOS2 on a python-can virtual bus) -> the UDP packet bytes
--> encoder bridge, state estimator, event detector (sensing.pipeline) -> deadbeat controller and
-stride machine -> motor driver (our CANopen master on the same virtual bus) -> CAN frames that the
-emulated drive takes at the next period. Each module sees exactly what its node would, minus the
-transport delays; a run is deterministic and many times faster than real time. Used by the tests
+-> encoder bridge, state estimator, event detector (sensing.pipeline) -> the deadbeat
+controller's stride policy (control.stride_policy, as the node runs it) -> motor driver (our
+CANopen master on the same virtual bus) -> CAN frames that the emulated drive takes at the next
+period. Each module sees exactly what its node would, minus the transport delays; a run is
+deterministic and many times faster than real time. Used by the tests
 to check the loop end to end (signs, units, timing) and by the benchmarks.
 """
 
@@ -18,14 +19,13 @@ import can
 
 from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 from hopper_ros.hardware import packet as packet_format
-from hopper_ros.motor_driver import DriverSettings, MotorDriver
+from hopper_ros.canbus.driver import DriverSettings, MotorDriver
 from hopper_ros.sensing.pipeline import SensingPipeline
 from hopper_ros.sensing.samples import EventType
 from hopper_ros.sim.robot import SimRobot
 
-from .deadbeat import DeadbeatController, StrideDecision
-from .closed_loop import decide_at_apex
-from .stride_machine import StrideMachine
+from hopper_ros.control.deadbeat import DeadbeatController, StrideDecision
+from hopper_ros.control.stride_policy import StridePolicy, StrideSettings
 
 _CHANNELS = iter(range(1 << 30))
 
@@ -42,7 +42,7 @@ class GraphLockstep:
     """Simulated robot + sensing + controller + motor driver, stepped together."""
 
     def __init__(self, sim_config, hardware: Mapping[str, Any], controller: DeadbeatController,
-                 driver_settings: DriverSettings | None = None) -> None:
+                 driver_settings: DriverSettings | None = None, stride_settings: StrideSettings | None = None) -> None:
         channel = f"graph_lockstep_{next(_CHANNELS)}"
         self._drive_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self._master_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
@@ -50,8 +50,7 @@ class GraphLockstep:
         self.driver = MotorDriver(self._master_bus, hardware, driver_settings or DriverSettings(), clock=self._now)
         self.sensing = SensingPipeline.from_files(hardware=hardware)
         self.controller = controller
-        self.machine = StrideMachine()
-        self.setpoint: tuple[float, float] | None = None
+        self.policy = StridePolicy(controller, stride_settings or StrideSettings())
 
     def _now(self) -> float:
         return self.robot.t
@@ -60,10 +59,12 @@ class GraphLockstep:
         self._drive_bus.shutdown()
         self._master_bus.shutdown()
 
+    @property
+    def setpoint(self) -> tuple[float, float] | None:
+        return self.policy.setpoint
+
     def set_setpoint(self, height: float, speed: float) -> None:
-        self.setpoint = (height, speed)
-        self.controller.prime(height, speed)
-        self.machine.hold(self.controller.neutral_angle(speed))
+        self.policy.on_setpoint(height, speed)
 
     def step(self, run: GraphRun) -> None:
         sample = self.robot.step()
@@ -75,9 +76,12 @@ class GraphLockstep:
         output = self.sensing.process(packet_format.encode(sample.packet), sample.truth.t)
         for event in output.events:
             self._on_event(event, run)
-        if output.estimates:
-            mode, setpoint = self.machine.command(output.estimates[-1].stamp)
-            self.driver.command(mode, setpoint)
+        if output.estimates:                    # the node's keep-alive timer, here at every estimate
+            now = output.estimates[-1].stamp
+            command = self.policy.command(now)
+            if self.policy.due(command, now):
+                self.driver.command(command.mode, command.setpoint, command.duration, self._now() - command.time)
+            self.policy.drain_events()
         self.driver.cycle()
         while (frame := self._master_bus.recv(timeout=0.0)) is not None:
             self.driver.handle(frame)
@@ -86,17 +90,15 @@ class GraphLockstep:
         state = event.state
         if event.kind is EventType.APEX:
             run.apexes.append((event.time, state.z, state.y_dot))
-            self.controller.observe(state.z, state.y_dot)
-            if self.setpoint is None:
-                return
-            run.decisions.append(decide_at_apex(self.controller, self.machine, state.z, state.y_dot, self.setpoint,
-                                                event.stride_index))
+            decision = self.policy.on_apex(state.z, state.y_dot, event.stride_index)
+            if decision is not None:
+                run.decisions.append(decision)
         elif event.kind is EventType.PRE_TOUCHDOWN:
-            self.machine.on_pre_touchdown()
+            self.policy.on_pre_touchdown(event.time, state.z, state.z_dot, state.leg_angle, state.leg_angle_rate)
         elif event.kind is EventType.TOUCHDOWN:
-            self.machine.on_touchdown(event.time)
+            self.policy.on_touchdown(event.time)
         elif event.kind is EventType.LIFTOFF:
-            self.machine.on_liftoff(state.leg_angle)
+            self.policy.on_liftoff(state.leg_angle)
 
     def run(self, setpoints: Iterable[tuple[float, float]], settle_time: float = 0.5,
             max_time: float = 600.0) -> GraphRun:

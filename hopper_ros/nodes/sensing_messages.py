@@ -1,7 +1,6 @@
-"""Our messages <-> the sensing modules' dataclasses, for the three nodes (and their tests).
-
-Imports the generated hopper_ros.msg classes: use it where ROS is available. Stamps are host
-time in seconds on the module side and builtin_interfaces/Time on the message side.
+"""Our messages <-> the sensing modules' dataclasses (hopper_ros.sensing), for the three sensing
+nodes (and their tests). Stamps are host time in seconds on the module side and
+builtin_interfaces/Time on the message side (nodes/stamps.py).
 """
 
 from __future__ import annotations
@@ -9,13 +8,12 @@ from __future__ import annotations
 import math
 from typing import Mapping, Sequence
 
-from builtin_interfaces.msg import Time as TimeMsg
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from hopper_ros.msg import ApexState, BodyMeasurement, BodyState, EncoderSample, GaitEvent
-
-from .bridge import BridgeSample
-from .samples import DetectedEvent, Estimate, Measurement
+from hopper_ros.nodes.stamps import to_seconds, to_stamp
+from hopper_ros.sensing.bridge import BridgeSample
+from hopper_ros.sensing.samples import DetectedEvent, Estimate, Measurement
 
 
 def sample_qos(depth: int) -> QoSProfile:
@@ -23,22 +21,10 @@ def sample_qos(depth: int) -> QoSProfile:
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE)
 
 
-def to_time(seconds: float, stamp: TimeMsg | None = None) -> TimeMsg:
-    """Host time [s] as a message stamp (filled in place when `stamp` is given)."""
-    nanoseconds = int(round(seconds * 1e9))
-    stamp = stamp if stamp is not None else TimeMsg()
-    stamp.sec, stamp.nanosec = divmod(nanoseconds, 1_000_000_000)
-    return stamp
-
-
-def to_seconds(stamp: TimeMsg) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
 # ---------------------------------------------------------------------- encoder bridge
 def fill_encoder_sample(msg: EncoderSample, sample: BridgeSample) -> EncoderSample:
     packet = sample.packet
-    to_time(sample.receive_time, msg.header.stamp)
+    to_stamp(sample.receive_time, msg.header.stamp)
     msg.header.frame_id = "boom"
     msg.format_version = packet.version
     msg.sequence = packet.sequence
@@ -52,7 +38,7 @@ def fill_encoder_sample(msg: EncoderSample, sample: BridgeSample) -> EncoderSamp
 
 def fill_body_measurement(msg: BodyMeasurement, sample: BridgeSample) -> BodyMeasurement:
     position = sample.position
-    to_time(sample.receive_time, msg.header.stamp)
+    to_stamp(sample.receive_time, msg.header.stamp)
     msg.header.frame_id = "ground"
     msg.sequence = sample.packet.sequence
     msg.mcu_time = sample.mcu_time
@@ -70,7 +56,7 @@ def measurement_from_msg(msg: BodyMeasurement) -> Measurement:
 
 # ---------------------------------------------------------------------- state estimator
 def fill_body_state(msg: BodyState, estimate: Estimate) -> BodyState:
-    to_time(estimate.stamp, msg.header.stamp)
+    to_stamp(estimate.stamp, msg.header.stamp)
     msg.header.frame_id = "ground"
     msg.sequence = estimate.sequence
     msg.y, msg.z, msg.y_dot, msg.z_dot = estimate.y, estimate.z, estimate.y_dot, estimate.z_dot
@@ -93,7 +79,7 @@ def estimate_from_msg(msg: BodyState) -> Estimate:
 # ---------------------------------------------------------------------- event detector
 def gait_event_msg(event: DetectedEvent, detection_delay: float) -> GaitEvent:
     msg = GaitEvent()
-    to_time(event.time, msg.header.stamp)
+    to_stamp(event.time, msg.header.stamp)
     msg.header.frame_id = "ground"
     msg.type = int(event.kind)
     msg.stride_index = event.stride_index
@@ -104,7 +90,7 @@ def gait_event_msg(event: DetectedEvent, detection_delay: float) -> GaitEvent:
 
 def apex_state_msg(event: DetectedEvent) -> ApexState:
     msg = ApexState()
-    to_time(event.time, msg.header.stamp)
+    to_stamp(event.time, msg.header.stamp)
     msg.header.frame_id = "ground"
     msg.stride_index = event.stride_index
     msg.apex_height = event.state.z

@@ -16,7 +16,7 @@ from typing import Any, Iterable, Mapping
 from hopper_ros.sim.experiment import StrideExperiment, drive_hold
 from hopper_ros.sim.robot import SimRobot
 
-from .deadbeat import DeadbeatController
+from hopper_ros.control.deadbeat import DeadbeatController
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ from hopper_ros.hardware.packet import EncoderPacket
 from hopper_ros.sim.experiment import ExperimentSeries
 from hopper_ros.sim.robot import MCU_CLOCK_START_US, SimRobot, TrueState
 
-from .samples import EventType
+from hopper_ros.sensing.samples import EventType
 
 MCU_CLOCK_OFFSET = MCU_CLOCK_START_US * 1e-6   # [s] microcontroller time at simulation time 0
 KINDS = {"apex": EventType.APEX, "touchdown": EventType.TOUCHDOWN, "bottom": EventType.BOTTOM,

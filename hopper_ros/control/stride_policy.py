@@ -1,0 +1,197 @@
+"""The deadbeat controller's whole stride policy (Fig 5.3, or the single-stride experiment of
+Fig 4.1) as a plain object: apexes, gait events and a drive fault in, the motor command for any
+instant out. The deadbeat_controller node wires its topics to it; the in-process graph
+(`harness.graph_lockstep`) runs the same object, so the two run one piece of code.
+
+- At an apex: closed loop, the two-stage decision (`closed_loop.decide_at_apex`) for the
+  setpoint in force; single stride, the plan for the apex the robot was thrown to (the ramp ends
+  at the model's predicted lift-off), BRAKE after the second apex.
+- In stance: MODE_RAMP, the ramp (2.32) stamped with the touchdown; the driver computes its
+  current every SYNC period itself, so delays and jitter of the command stream neither shift nor
+  stretch it.
+- With `ramp_ahead` the ramp goes out at the pre-touchdown event already, stamped with the
+  touchdown predicted from that event's state (physics.flight.touchdown_time): zero current until
+  then; the measured touchdown re-stamps it. No touchdown within `touchdown_grace` of the
+  predicted one cancels the ramp (zero current, counted).
+- Single stride: `brake_disable_delay` after BRAKE began the drive is disabled (the robot sits back).
+- A command goes out when it changes and otherwise every `keep_alive` (`due`), which feeds the
+  motor driver's watchdog.
+Times are seconds on one clock (the event stamps' clock); a caller may hand its own stamp of an
+instant along (`now_stamp`, the touchdown's `stamp`), which a command at that instant carries back.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any, Mapping
+
+from hopper_ros.physics.flight import touchdown_time
+from hopper_ros.physics.predictors import predict_stride
+
+from .closed_loop import decide_at_apex
+from .deadbeat import DeadbeatController, StrideDecision
+from .stride_machine import MODE_DISABLED, Phase, StrideMachine, StridePlan
+
+MODE_RAMP = 3   # MotorCommand.MODE_RAMP: the driver runs the ramp (2.32) from the stamp
+
+
+@dataclass(frozen=True)
+class StrideSettings:
+    """control.yaml `stride` (beyond the thesis): the stance ramp's timing and the keep-alive."""
+
+    ramp_ahead: bool = False            # send the ramp at pre-touchdown, stamped with the predicted touchdown
+    touchdown_grace: float = 0.02       # [s] no touchdown this long after the predicted one: ramp cancelled
+    keep_alive: float = 0.003           # [s] an unchanged command is repeated this often
+    brake_disable_delay: float = 0.5    # [s] single stride: braking this long, then the drive disabled
+
+    @classmethod
+    def from_mapping(cls, section: Mapping[str, Any], **overrides: Any) -> "StrideSettings":
+        known = {f.name for f in fields(cls)}
+        values = {k: v for k, v in {**dict(section), **overrides}.items() if k in known and v is not None}
+        return cls(**values)
+
+
+@dataclass(frozen=True)
+class Command:
+    """A motor command (MotorCommand's fields): mode, setpoint, ramp duration and its stamp."""
+
+    mode: int
+    setpoint: float
+    duration: float = 0.0
+    time: float = math.nan      # [s] the stamp: now, the touchdown or the predicted touchdown
+    stamp: Any = None           # the caller's own stamp of that instant when it gave one
+
+
+class StridePolicy:
+    """One controller's strides: closed loop (`single=None`) or one stride of (tau_0, touchdown_angle)."""
+
+    def __init__(self, controller: DeadbeatController, settings: StrideSettings = StrideSettings(),
+                 single: tuple[float, float] | None = None) -> None:
+        self.controller, self.params, self.settings = controller, controller.params, settings
+        self.machine = StrideMachine()
+        self.single = single
+        if single is not None:
+            tau_0, angle = single
+            if not (math.isfinite(tau_0) and math.isfinite(angle)):
+                raise ValueError("a single stride needs a finite tau_0 and touchdown_angle")
+            self.machine.start_single_stride(StridePlan(tau_0, angle, math.inf))
+        self.setpoint: tuple[float, float] | None = None
+        self.last_decision: StrideDecision | None = None
+        self.counters = {"strides": 0, "infeasible": 0, "faults": 0, "commands": 0, "touchdowns_missed": 0}
+        self.events: list[tuple[str, str]] = []     # (logger level, text) for the caller's log
+        self._touchdown: tuple[float, Any] = (math.nan, None)
+        self._predicted_touchdown = math.nan
+        self._cancelled_ramp = False
+        self._brake_since = math.nan
+        self._last = (MODE_DISABLED, 0.0)
+        self._last_sent = -math.inf
+
+    @property
+    def phase(self) -> Phase:
+        return self.machine.phase
+
+    # ------------------------------------------------------------------ inputs
+    def on_setpoint(self, apex_height: float, forward_speed: float) -> None:
+        self.setpoint = (apex_height, forward_speed)
+        if self.single is None:             # ready for the throw: the leg at the neutral angle
+            self.controller.prime(*self.setpoint)
+            self.machine.hold(self.controller.neutral_angle(forward_speed))
+
+    def on_apex(self, apex_height: float, forward_speed: float, stride_index: int) -> StrideDecision | None:
+        """The decision this apex made (None: none, e.g. no setpoint yet)."""
+        if self.single is not None:
+            return self._single_stride_apex(apex_height, forward_speed, stride_index)
+        self.controller.observe(apex_height, forward_speed)
+        if self.setpoint is None:
+            return None
+        decision = decide_at_apex(self.controller, self.machine, apex_height, forward_speed, self.setpoint,
+                                  stride_index)
+        self.last_decision = decision
+        self.counters["strides"] += 1
+        if not decision.feasible:
+            self.counters["infeasible"] += 1
+            self.events.append(("warning", f"stride {stride_index}: infeasible ({decision.reason}); leg held, no torque"))
+        return decision
+
+    def _single_stride_apex(self, apex_height: float, forward_speed: float, stride_index: int) -> StrideDecision | None:
+        decision = None
+        if self.machine.phase is Phase.INITIALISE:
+            tau_0, angle = self.single
+            prediction = predict_stride(self.params, apex_height, forward_speed, angle, tau_0)
+            ramp = prediction.ramp_duration if prediction.ok else 0.0
+            self.machine.plan = StridePlan(tau_0, angle, ramp)
+            decision = StrideDecision(stride_index, bool(prediction.ok), prediction.failure, tau_0, angle, ramp,
+                                      prediction.next_apex_height, prediction.next_forward_speed,
+                                      prediction.stride_time, math.nan, math.nan)
+        self.machine.on_apex(None)
+        if self.machine.phase is Phase.BRAKE:
+            self.events.append(("info", "single stride done: braking"))
+        return decision
+
+    def on_pre_touchdown(self, time: float, z: float, z_dot: float, leg_angle: float, leg_angle_rate: float) -> None:
+        """Pre-touchdown at `time`, the body's state there (for the predicted touchdown)."""
+        self.machine.on_pre_touchdown()
+        self._predicted_touchdown = time + self.time_to_touchdown(z, z_dot, leg_angle, leg_angle_rate) \
+            if self.settings.ramp_ahead else math.nan
+        self._cancelled_ramp = False
+
+    def time_to_touchdown(self, z: float, z_dot: float, leg_angle: float, leg_angle_rate: float) -> float:
+        """The flight (2.14) from this state until the toe meets the ground."""
+        p = self.params
+        return touchdown_time(z, z_dot, leg_angle, leg_angle_rate, p.rest_length, p.gravity, p.flight_damping_vertical)
+
+    def on_touchdown(self, time: float, stamp: Any = None) -> None:
+        self.machine.on_touchdown(time)
+        self._touchdown = (time, stamp)
+
+    def on_liftoff(self, leg_angle: float) -> None:
+        self.machine.on_liftoff(leg_angle)
+
+    def on_drive_fault(self, message: str) -> bool:
+        """The motor driver reports a drive fault or a lost drive: hold the leg, no torque. False
+        when the stride is in the safe state already."""
+        if self.machine.phase is Phase.SAFE:
+            return False
+        self.counters["faults"] += 1
+        self.machine.fault(f"motor driver: {message}")
+        self.events.append(("error", self.machine.reason))
+        return True
+
+    # ------------------------------------------------------------------ output
+    def command(self, now: float, now_stamp: Any = None) -> Command:
+        """The motor command for the instant `now`."""
+        machine, s = self.machine, self.settings
+        mode, setpoint = machine.command(now)
+        if machine.phase is Phase.BRAKE:
+            if math.isnan(self._brake_since):
+                self._brake_since = now
+            elif now - self._brake_since > s.brake_disable_delay:
+                mode, setpoint = MODE_DISABLED, 0.0     # the robot sits back: drive off
+        phase, plan = machine.phase, machine.plan
+        if phase is Phase.STANCE and plan is not None:
+            # the driver runs the ramp itself, from the touchdown time: jitter in the stream cannot shift it
+            return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, *self._touchdown)
+        if phase is Phase.PRE_TOUCHDOWN and plan is not None and math.isfinite(self._predicted_touchdown):
+            if now <= self._predicted_touchdown + s.touchdown_grace:
+                # scheduled ahead: zero current until the predicted touchdown, then the ramp
+                return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, self._predicted_touchdown)
+            if not self._cancelled_ramp:
+                self._cancelled_ramp = True
+                self.counters["touchdowns_missed"] += 1
+                self.events.append(("warning", f"no touchdown within {s.touchdown_grace * 1e3:.0f} ms of the "
+                                               f"predicted one: stance ramp cancelled"))
+        return Command(mode, float(setpoint), 0.0, now, now_stamp)
+
+    def due(self, command: Command, now: float) -> bool:
+        """Whether `command` goes out now: it changed, or `keep_alive` passed (half of it, so a
+        timer of that period never skips one). Counted when True."""
+        if (command.mode, command.setpoint) == self._last and now - self._last_sent < 0.5 * self.settings.keep_alive:
+            return False
+        self._last, self._last_sent = (command.mode, command.setpoint), now
+        self.counters["commands"] += 1
+        return True
+
+    def drain_events(self) -> list[tuple[str, str]]:
+        events, self.events = self.events, []
+        return events

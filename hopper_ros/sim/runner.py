@@ -1,0 +1,129 @@
+"""The simulated robot run as the robot runs: its own thread steps the physics once per period
+(on the wall clock in `realtime` mode, as fast as it goes in `lockstep`), sends the
+microcontroller's UDP packet to the encoder bridge on loopback and hands every period's sample to
+the caller (the sim_robot node publishes its force plate, truth and events). The emulated EPOS2
+sits on the CAN transport the `can` setting names, the motor driver's own selection
+(canbus.driver.bus). No ROS import."""
+
+from __future__ import annotations
+
+import dataclasses
+import socket
+import threading
+import time
+from typing import Any, Callable, Mapping
+
+from hopper_ros.canbus.driver.bus import open_drive_side, sim_transport
+from hopper_ros.hardware import packet as packet_format
+
+from .experiment import ExperimentSeries
+from .robot import SimRobot, SimSample
+
+MODES = ("realtime", "lockstep")
+RESYNC_LATENESS = 0.05     # [s] further behind than this, real-time mode stops catching up
+
+
+def open_drive(can_setting: str, hardware: Mapping[str, Any], port: int | None):
+    """The emulated EPOS2 on the transport `can_setting` names (`hub`, `virtual:CHANNEL`, `none`);
+    returns (drive, closer, hub or None), (None, None, None) for none."""
+    transport = sim_transport(can_setting, hardware["can"], port)
+    if transport is None:
+        return None, None, None
+    from hopper_ros.canbus.epos2_emulator import Epos2Emulator
+
+    bus, close, hub = open_drive_side(transport)
+    return Epos2Emulator(bus, hardware), close, hub
+
+
+class SimRunner:
+    """SimRobot with its drive, packet stream and pacing. `on_sample(sample)` is called from the
+    stepping thread every period; `on_done()` once `duration` of simulated time has run."""
+
+    def __init__(self, config, hardware: Mapping[str, Any], *, mode: str = "realtime", can: str = "hub",
+                 can_port: int | None = None, udp_host: str = "127.0.0.1", udp_port: int | None = None,
+                 duration: float = 0.0, experiments: bool = False, throw_lead: float = 0.05,
+                 on_sample: Callable[[SimSample], None] = lambda sample: None, on_done: Callable[[], None] = lambda: None):
+        if mode not in MODES:
+            raise ValueError(f"mode must be realtime or lockstep, got {mode!r}")
+        if udp_host not in ("127.0.0.1", "localhost"):
+            raise ValueError(f"udp_host {udp_host!r}: the simulated robot only sends on loopback (127.0.0.1)")
+        if experiments and can != "none":
+            raise ValueError("experiments:=true runs the hip itself: it needs can:=none (no drive on a bus)")
+        self.mode, self.duration, self.throw_lead = mode, duration, throw_lead
+        self._on_sample, self._on_done = on_sample, on_done
+        self.drive, self._close_drive, self.hub = open_drive(can, hardware, can_port)
+        self.robot = SimRobot(config, hardware, drive=self.drive)
+        self.series = ExperimentSeries(self.robot, seed=config.seed) if experiments else None
+        self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._udp.bind(("127.0.0.1", 0))            # a sender on loopback only, not on 0.0.0.0
+        port = udp_port if udp_port is not None else hardware["microcontroller"]["port"]
+        self.udp_address = ("127.0.0.1", int(port))
+        self.counters = {"periods": 0, "deadline_misses": 0, "udp_errors": 0, "falls": 0, "strides": 0,
+                         "throws": 0}          # falls, strides: counted by the caller, from the samples' events
+        self._lock = threading.Lock()
+        self._pending_throw = None
+        self._stop = threading.Event()
+        self._wall_start = time.monotonic()
+        self._thread = threading.Thread(target=self._run, name="sim-robot", daemon=True)
+
+    def start(self) -> None:
+        self._wall_start = time.monotonic()
+        self._thread.start()
+
+    def throw(self, apex_height: float, forward_speed: float, leg_angle: float, y: float = 0.0) -> None:
+        """Throw the robot to a new apex at the next period (any thread)."""
+        with self._lock:
+            self._pending_throw = (apex_height, forward_speed, leg_angle, y)
+
+    def realtime_factor(self) -> float:
+        wall = time.monotonic() - self._wall_start
+        return self.robot.t / wall if wall > 0 else 0.0
+
+    def all_counters(self) -> dict[str, int]:
+        """Ours, the emulated drive's (drive_*) and the CAN hub's (hub_*: clients dropped, garbage, ...)."""
+        counters = dict(self.counters)
+        if self.drive is not None:
+            counters.update({f"drive_{k}": v for k, v in dataclasses.asdict(self.drive.counters).items()})
+        if self.hub is not None:
+            counters.update({f"hub_{k}": v for k, v in dataclasses.asdict(self.hub.counters).items()})
+        return counters
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(2.0)
+        self._udp.close()
+        if self._close_drive is not None:
+            self._close_drive()
+
+    def _run(self) -> None:
+        period = self.robot.period
+        deadline = time.monotonic()
+        realtime = self.mode == "realtime"
+        while not self._stop.is_set():
+            if self.duration and self.robot.t >= self.duration - 1e-9:
+                self._on_done()
+                return
+            if self.series is not None and (self.robot.experiment is None or self.robot.experiment.done):
+                self.series.start_next()
+            with self._lock:
+                throw, self._pending_throw = self._pending_throw, None
+            if throw is not None:
+                self.robot.throw(*throw, lead_time=self.throw_lead)
+                self.counters["throws"] += 1
+            sample = self.robot.step()
+            self.counters["periods"] += 1
+            try:
+                self._udp.sendto(packet_format.encode(sample.packet), self.udp_address)
+            except OSError:
+                self.counters["udp_errors"] += 1
+            self._on_sample(sample)
+            if realtime:
+                deadline += period
+                wait = deadline - time.monotonic()
+                if wait > 0.0:
+                    time.sleep(wait)
+                else:
+                    self.counters["deadline_misses"] += 1
+                    if wait < -RESYNC_LATENESS:
+                        deadline = time.monotonic()
