@@ -14,7 +14,7 @@ import pytest
 
 from hopper_ros.diagnosis import DiagnosisError, diagnose_file
 from hopper_ros.diagnosis.core import Settings, location_line
-from hopper_ros.identification.recordings import Recording, write_csv
+from hopper_ros.recording.recordings import Recording, write_csv
 from hopper_ros.physics import effects as library
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))

@@ -178,7 +178,7 @@ def residuals(tmp_path_factory):
     """The located residuals of two recordings whose law no library entry has, under the model."""
     from hopper_ros.diagnosis.core import base_variant, load_settings, prepare
     from hopper_ros.diagnosis.locate import residual_sets
-    from hopper_ros.identification.recordings import load_recording
+    from hopper_ros.recording.recordings import load_recording
     from hopper_ros.physics.params import load_model
 
     folder = tmp_path_factory.mktemp("laws")

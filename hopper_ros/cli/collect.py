@@ -6,7 +6,7 @@
 Runs in lockstep in this process (SimRobot + the experiment, no ROS graph, as fast as it goes)
 and writes a bag with the topics a live recording holds: body_measurement, force_plate,
 sim/truth, stride_command, sim/events. Failed strides are discarded. `--csv` also writes
-`t,y,z,theta,tau` (docs/recording.md). Code: hopper_ros/recording/collect.py.
+`t,y,z,theta,tau` (docs/recording.md). Code: hopper_ros/harness/collect.py.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from hopper_ros.identification.recordings import Recording, load_recording
+from hopper_ros.recording.recordings import Recording, load_recording
 from hopper_ros.physics.params import ModelParams, load_model
 
 from .core import diagnose, load_settings

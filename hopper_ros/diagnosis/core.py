@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from hopper_ros.config import load_yaml
-from hopper_ros.identification.recordings import Recording
+from hopper_ros.recording.recordings import Recording
 from hopper_ros.physics import effects as library
 from hopper_ros.physics import laws
 from hopper_ros.physics.metrics import position_error_pct, time_error_pct, velocity_error_pct

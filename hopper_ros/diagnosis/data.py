@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hopper_ros.identification.recordings import Recording
+from hopper_ros.recording.recordings import Recording
 from hopper_ros.identification.strides import ExtractionSettings, extract_strides
 from hopper_ros.physics.exact import Phase
 from hopper_ros.physics.params import ModelParams
