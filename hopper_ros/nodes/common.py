@@ -46,6 +46,17 @@ def read_only_parameters(node) -> Callable[[str, Any, str], Any]:
         name, default, ParameterDescriptor(description=text, read_only=True)).value
 
 
+def sensing_parameters(node):
+    """The sensing nodes' shared parameters: (`param` as `read_only_parameters`, the sensing config of
+    `sensing_file`, the diagnostics period: `diagnostics_period`, or the sensing file's when 0)."""
+    from hopper_ros.sensing.config import load_sensing_config
+
+    param = read_only_parameters(node)
+    config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
+    period = param("diagnostics_period", 0.0, "[s] diagnostics period (0 = sensing file)") or config.diagnostics_period
+    return param, config, period
+
+
 def stop_requested() -> bool:
     """True once SIGINT/SIGTERM arrived: for a node whose start-up waits (e.g. for a server)."""
     return _ACTIVE_STOP is not None and _ACTIVE_STOP.received is not None

@@ -33,10 +33,9 @@ from rclpy.node import Node
 
 from hopper_ros.config_schemas import load_hardware
 from hopper_ros.msg import BodyMeasurement, EncoderSample
-from hopper_ros.nodes.common import read_only_parameters, run_node
+from hopper_ros.nodes.common import run_node, sensing_parameters
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.sensing.bridge import MALFORMED, ORDER, EncoderBridge
-from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.nodes.sensing_messages import (CounterDeltas, any_of, fill_body_measurement,
                                          fill_encoder_sample, sample_qos)
 
@@ -48,14 +47,12 @@ class EncoderBridgeNode(Node):
     def __init__(self, **node_kwargs):
         node_kwargs.setdefault("start_parameter_services", False)   # read-only parameters, fewer entities
         super().__init__("encoder_bridge", **node_kwargs)
-        param = read_only_parameters(self)
-        config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
+        param, config, period = sensing_parameters(self)
         hardware = load_hardware(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
                              config.hardware_file)
         microcontroller = hardware["microcontroller"]
         host = param("host", "", "address to listen on ('' = hardware.yaml)") or str(microcontroller["host"])
         port = param("port", 0, "UDP port ('' = hardware.yaml)") or int(microcontroller["port"])
-        period = param("diagnostics_period", 0.0, "[s] diagnostics period (0 = sensing file)") or config.diagnostics_period
         self.bridge = EncoderBridge.from_config(hardware, config.bridge)
 
         self._socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

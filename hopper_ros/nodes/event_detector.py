@@ -26,10 +26,9 @@ import time
 from rclpy.node import Node
 
 from hopper_ros.msg import ApexState, BodyState, GaitEvent
-from hopper_ros.nodes.common import read_only_parameters, run_node
+from hopper_ros.nodes.common import run_node, sensing_parameters
 from hopper_ros.config_schemas import load_model
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
-from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.sensing.events import EventDetector
 from hopper_ros.nodes.sensing_messages import (CounterDeltas, any_of, apex_state_msg,
                                          estimate_from_msg, gait_event_msg, sample_qos, to_seconds)
@@ -42,10 +41,8 @@ class EventDetectorNode(Node):
     def __init__(self, **node_kwargs):
         node_kwargs.setdefault("start_parameter_services", False)
         super().__init__("event_detector", **node_kwargs)
-        param = read_only_parameters(self)
-        config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
+        param, config, period = sensing_parameters(self)
         model_file = param("model_file", "", "model parameters (YAML), '' = the sensing file's") or config.model_file
-        period = param("diagnostics_period", 0.0, "[s] diagnostics period (0 = sensing file)") or config.diagnostics_period
         self.detector = EventDetector(load_model(model_file), config.detector)
         self._events = self.create_publisher(GaitEvent, "gait_event", sample_qos(EVENT_DEPTH))
         self._apexes = self.create_publisher(ApexState, "apex", 10)

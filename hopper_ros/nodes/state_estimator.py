@@ -28,9 +28,8 @@ from rclpy.node import Node
 
 from hopper_ros.config_schemas import load_hardware
 from hopper_ros.msg import BodyMeasurement, BodyState
-from hopper_ros.nodes.common import read_only_parameters, run_node
+from hopper_ros.nodes.common import run_node, sensing_parameters
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
-from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.sensing.estimator import StateEstimator
 from hopper_ros.nodes.sensing_messages import (CounterDeltas, any_of, fill_body_state,
                                          measurement_from_msg, sample_qos)
@@ -43,11 +42,9 @@ class StateEstimatorNode(Node):
     def __init__(self, **node_kwargs):
         node_kwargs.setdefault("start_parameter_services", False)
         super().__init__("state_estimator", **node_kwargs)
-        param = read_only_parameters(self)
-        config = load_sensing_config(param("sensing_file", "sensing.yaml", "sensing settings (YAML)"))
+        param, config, period = sensing_parameters(self)
         hardware = load_hardware(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
                              config.hardware_file)
-        period = param("diagnostics_period", 0.0, "[s] diagnostics period (0 = sensing file)") or config.diagnostics_period
         self.estimator = StateEstimator.from_config(config.estimator, hardware)
         self._state_msg = BodyState()
         qos = sample_qos(config.queue_depth)

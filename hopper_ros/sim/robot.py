@@ -17,7 +17,6 @@ produce the same packets as real-time runs, only faster.
 
 from __future__ import annotations
 
-import math
 import random
 from collections import deque
 from dataclasses import dataclass, field
