@@ -63,10 +63,27 @@ class Discovery:
 
     def words(self, scale: float = 1.0) -> str:
         phase, direction = SITE_WORDS[self.site]
-        parts = [f"{w} ({key}), {scale * c:+.3g} {u}" for key, c, w, u in self.terms()]
+        terms = {key: (c, w, u) for key, c, w, u in self.terms()}
+        parts = []
+        for (odd, even), say in DIRECTIONAL.items():
+            if odd in terms and even in terms:       # a v + b |v|: one law each way of the motion
+                a, b = scale * terms.pop(odd)[0], scale * terms.pop(even)[0]
+                parts.append(say(a + b, a - b))
+        parts += [f"{w} ({key}), {scale * c:+.3g} {u}" for key, (c, w, u) in terms.items()]
         where = {"flight": "in flight", "stance": "in stance", "touchdown": "at touchdown",
                  "lift-off": "at lift-off"}[phase]
         return f"{where}, {direction}: " + "; ".join(parts)
+
+
+# a velocity's term and its size's, (a v + b |v|): (a + b) v when v > 0, (a - b) v when v < 0, said as one law
+DIRECTIONAL = {
+    ("zdot", "|zdot|"): lambda up, down: (f"a vertical force proportional to the vertical speed, {up:+.3g} N s/m while "
+                                          f"rising and {down:+.3g} N s/m while descending (a drag that acts one way "
+                                          "more than the other) (zdot, |zdot|)"),
+    ("rho'", "|rho'|"): lambda extension, compression: (
+        f"extra leg damping that differs with the direction: {extension:+.3g} N s/m in extension, "
+        f"{compression:+.3g} N s/m in compression (rho', |rho'|)"),
+}
 
 
 def hinge_of(field: str):
