@@ -124,6 +124,13 @@ class StanceSolution:
     def as_array(self) -> "StanceSolution":
         """The same solution on numpy arrays (1-D), e.g. to evaluate it on a grid of times."""
         copy = StanceSolution.__new__(StanceSolution)
+        if self.xp is SCALAR:     # floats: one array, each field a view of length one (one allocation)
+            names = self.__slots__[1:]
+            values = np.array([getattr(self, name) for name in names], dtype=float)
+            copy.xp = ARRAY
+            for i, name in enumerate(names):
+                setattr(copy, name, values[i:i + 1])
+            return copy
         for name in self.__slots__:
             setattr(copy, name, np.atleast_1d(np.asarray(getattr(self, name), dtype=float)) if name != "xp" else ARRAY)
         return copy
