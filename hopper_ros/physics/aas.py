@@ -426,9 +426,17 @@ def _predict_aas_scalar(params: ModelParams, apex_height: float, forward_speed: 
     gravity_arm_td = 2.0 * rho_0 * sin_td
     fixed_ramp = ramp_duration is not None
 
-    def momentum_map(momentum):
-        """One pass of (2.34): StanceSolution.__init__, liftoff_time (2.29), leg_length (2.17),
-        leg_angle (2.19) and mean_ramp_impulse on floats. (p_hat, fields, t_lo, t_f, rho_lo, theta_lo)."""
+    half_period = pi / sqrt(k_over_m + 3.0 * theta_dot_td * theta_dot_td)
+    t_ramp, t_stance = max(ramp_duration if fixed_ramp else half_period, 1e-12), max(half_period, 1e-12)
+    impulse = (t_stance / 2.0 - t_stance * t_stance / (6.0 * t_ramp) if t_stance <= t_ramp
+               else t_ramp / 2.0 - t_ramp * t_ramp / (6.0 * t_stance))
+    p0 = momentum_td - tau_0 * impulse + m_g * half_period / 6.0 * rho_0 * sin_td
+    # The generic path's passes, inline: p1 = G(p0); (momentum_iterations - 2) times p2 = G(p1) and
+    # Aitken's step; the last pass G(p1) gives the stance. Each pass is StanceSolution.__init__,
+    # liftoff_time (2.29), leg_length (2.17), leg_angle (2.19) and (2.34)-(2.37) on floats.
+    passes = max(momentum_iterations, 2)
+    momentum = p1 = p0
+    for index in range(passes):
         omega = momentum / m_rho_sq
         w0_sq = k_over_m + 3.0 * omega * omega
         w0 = sqrt(w0_sq)
@@ -455,26 +463,20 @@ def _predict_aas_scalar(params: ModelParams, apex_height: float, forward_speed: 
         shift = phase_1 - phase_2
         theta_lo = touchdown_angle + x * t_lo + y * (decay * cos(w_d * t_lo + shift) - cos(shift))   # (2.19)
         t_f = ramp_duration if fixed_ramp else t_lo
+        if index == passes - 1:
+            break
         t_ramp, t_stance = max(t_f, 1e-12), max(t_lo, 1e-12)                        # (2.34)-(2.36)
         impulse = (t_stance / 2.0 - t_stance * t_stance / (6.0 * t_ramp) if t_stance <= t_ramp
                    else t_ramp / 2.0 - t_ramp * t_ramp / (6.0 * t_stance))
         updated = momentum_td - tau_0 * impulse + m_g * t_lo / 6.0 * (gravity_arm_td + rho_lo * sin(theta_lo))  # (2.37)
-        fields = (omega, w0, zeta, w_d, a, rho_eq, amplitude, phase_1, phase_2, phase_3, force_amplitude,
-                  force_offset, x, y)
-        return updated, fields, t_lo, t_f, rho_lo, theta_lo
-
-    half_period = pi / sqrt(k_over_m + 3.0 * theta_dot_td * theta_dot_td)
-    t_ramp, t_stance = max(ramp_duration if fixed_ramp else half_period, 1e-12), max(half_period, 1e-12)
-    impulse = (t_stance / 2.0 - t_stance * t_stance / (6.0 * t_ramp) if t_stance <= t_ramp
-               else t_ramp / 2.0 - t_ramp * t_ramp / (6.0 * t_stance))
-    p0 = momentum_td - tau_0 * impulse + m_g * half_period / 6.0 * rho_0 * sin_td
-    p1 = momentum_map(p0)[0]
-    for _ in range(momentum_iterations - 2):
-        p2 = momentum_map(p1)[0]
-        curvature = p2 - 2.0 * p1 + p0
-        p0, p1 = p1, (p2 - (p2 - p1) ** 2 / curvature if abs(curvature) > 1e-15 else p2)
-    _, fields, t_lo, t_f, rho_lo, theta_lo = momentum_map(p1)
-    omega, w0, _, w_d, a, _, amplitude, phase_1, phase_2, _, force_amplitude, force_offset, x, _ = fields
+        if index == 0:
+            p1 = updated
+        else:                                                                           # Aitken
+            curvature = updated - 2.0 * p1 + p0
+            p0, p1 = p1, (updated - (updated - p1) ** 2 / curvature if abs(curvature) > 1e-15 else updated)
+        momentum = p1
+    fields = (omega, w0, zeta, w_d, a, rho_eq, amplitude, phase_1, phase_2, phase_3, force_amplitude, force_offset,
+              x, y)
     stance = StanceSolution._from_fields(touchdown_angle, rho_0, fields)
     ok_lo = abs(-force_offset * exp(a * t_lo) / (amplitude * force_amplitude)) < 1.0
     decay = exp(-a * t_lo)
