@@ -387,7 +387,8 @@ def _finish_scalar(params, collision_factor, sin_td, ok_td, ok_lo, rho_dot_td, t
     else:
         code = _NONE if math.isfinite(z1 + speed1 + y1) else _NON_FINITE
     out = StridePrediction()
-    out.ok, out.failure_code = ok = code == _NONE, code
+    ok = code == _NONE
+    out.ok, out.failure_code = ok, code
     if ok:
         out.next_apex_height, out.next_forward_speed, out.stride_length, out.stride_time = z1, speed1, y1, t_d + t_lo + t_a
     else:

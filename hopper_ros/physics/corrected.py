@@ -80,8 +80,11 @@ def predict_corrected(params: ModelParams, apex_height, forward_speed, touchdown
     seed and whose `correction` holds the corrected stance on the nodes.
     """
     if select(apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration) is SCALAR:
-        return _predict_corrected_scalar(params, apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration,
-                                         nodes, sweeps)
+        try:
+            return _predict_corrected_scalar(params, apex_height, forward_speed, touchdown_angle, tau_0,
+                                             ramp_duration, nodes, sweeps)
+        except (ArithmeticError, ValueError):   # a degenerate stride on floats (math raises where numpy
+            pass                                #   gives inf or NaN): the array path, as before
     scalar = all(np.ndim(value) == 0 for value in (apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration)
                  if value is not None)
     seed = predict_aas(params, apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration,
