@@ -12,7 +12,7 @@ Both equations use a predictor's own stride: its next-apex energy already is E +
 solved together with z_next(tau_0, theta) = z* (5.6). Two stages, so that the 1 ms loop never
 waits (the thesis's 2-D optimiser could not fit in it):
 
-1. `first_decision`, within ~0.3 ms: Newton on the thesis's AAS (scalar closed forms, ~30 us per
+1. `first_decision`, within ~0.3 ms: Newton on the thesis's AAS (scalar closed forms, ~11 us per
    stride) from the last stride's inputs, aimed at the setpoint corrected by what the corrected
    predictor said about the AAS at the last stride (its defect). The leg starts moving at once.
 2. `refine`, during the flight (~1 ms; the flight lasts >100 ms): the same inversion on the
