@@ -12,7 +12,7 @@ Both equations use a predictor's own stride: its next-apex energy already is E +
 solved together with z_next(tau_0, theta) = z* (5.6). Two stages, so that the 1 ms loop never
 waits (the thesis's 2-D optimiser could not fit in it):
 
-1. `first_decision`, within ~0.3 ms: Newton on the thesis's AAS (scalar closed forms, ~30 us per
+1. `first_decision`, within ~0.3 ms: Newton on the thesis's AAS (scalar closed forms, ~11 us per
    stride) from the last stride's inputs, aimed at the setpoint corrected by what the corrected
    predictor said about the AAS at the last stride (its defect). The leg starts moving at once.
 2. `refine`, during the flight (~1 ms; the flight lasts >100 ms): the same inversion on the
@@ -153,12 +153,14 @@ class DeadbeatController:
         aim_speed = target_speed - bias[1] - self._defect[1]
         angle = self._warm_angle if self._warm_angle is not None else self.neutral_angle(forward_speed)
         warm_jacobian = self._jacobian
-        solved = self._newton(apex_height, forward_speed, aim_height, aim_speed, angle, self._warm_torque)
+        evaluated = {}      # (theta, tau_0) -> AAS stride: both attempts below revisit points
+        solved = self._newton(apex_height, forward_speed, aim_height, aim_speed, angle, self._warm_torque, evaluated)
         if (solved is None or solved[-1] == "height out of reach") and warm_jacobian is not None:
             # the last stride's Jacobian (Broyden-updated, then moved by stage 2's refinement) led
             # Newton astray: once more with a fresh finite-difference Jacobian at the warm start
             self._jacobian = None
-            solved = self._newton(apex_height, forward_speed, aim_height, aim_speed, angle, self._warm_torque)
+            solved = self._newton(apex_height, forward_speed, aim_height, aim_speed, angle, self._warm_torque,
+                                  evaluated)
         result = self._decision(stride_index, solved, target_height, target_speed, bias, forward_speed)
         if result.feasible:   # what the model (not the AAS) predicts is only known after stage 2
             result.predicted_apex_height, result.predicted_forward_speed = target_height, target_speed
@@ -192,14 +194,20 @@ class DeadbeatController:
         self._pending = result
         return result
 
-    def _newton(self, apex_height, forward_speed, aim_height, aim_speed, angle, torque):
-        """Stage 1's solve of z'(theta, tau_0) = z*, E'(theta, tau_0) = E* on the scalar AAS."""
+    def _newton(self, apex_height, forward_speed, aim_height, aim_speed, angle, torque, evaluated=None):
+        """Stage 1's solve of z'(theta, tau_0) = z*, E'(theta, tau_0) = E* on the scalar AAS.
+
+        `evaluated` {(theta, tau_0): prediction} keeps the AAS strides from this apex: a point met
+        again (the warm start of a second attempt, a Newton step that cycles) is not predicted twice."""
         s, p = self.settings, self.params
         m, g = p.body_mass, p.gravity
         target_energy = m * (0.5 * aim_speed ** 2 + g * aim_height)
+        evaluated = {} if evaluated is None else evaluated
 
         def residual(theta, tau):
-            r = predict_stride(p, apex_height, forward_speed, theta, tau, method="aas")
+            r = evaluated.get((theta, tau))
+            if r is None:
+                r = evaluated[theta, tau] = predict_stride(p, apex_height, forward_speed, theta, tau, method="aas")
             if not r.ok:
                 return None
             energy = m * (0.5 * r.next_forward_speed ** 2 + g * r.next_apex_height)

@@ -36,7 +36,7 @@ from hopper_ros.msg import MotorCommand, MotorStatus
 from hopper_ros.nodes import diagnostics
 from hopper_ros.nodes.common import read_only_parameters, run_node, stop_requested
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
-from hopper_ros.nodes.stamps import now_seconds, to_seconds
+from hopper_ros.nodes.stamps import now_seconds, stamp_of_ns, to_seconds
 
 #: commands: the latest one matters (a stale one is worse than none); matches reliable publishers too
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -92,6 +92,8 @@ class MotorDriverNode(Node):
             self._bus.shutdown()
             raise
         self._status_pub = self.create_publisher(MotorStatus, "motor_status", 10)
+        self._status_msg = MotorStatus()
+        self._status_msg.header.frame_id = "hip"
         self._diagnostics = DiagnosticsReporter(self, f"EPOS2 node {self._driver.node_id} on CAN {transport.interface}")
         self.create_subscription(MotorCommand, "motor_command", self._on_command, COMMAND_QOS)
         self._loop = CycleLoop(self._driver, self._lock, self._log, self._publish_status, self.get_logger().error,
@@ -112,17 +114,18 @@ class MotorDriverNode(Node):
             self._driver.command(msg.mode, msg.setpoint, msg.duration, age)
 
     def _publish_status(self) -> None:
+        # One message, refilled: this runs on the CAN cycle thread at up to 1 kHz, and every
+        # microsecond it holds the interpreter is one a command callback may wait (publish copies it)
+        msg = self._status_msg
         with self._lock:
             s = self._driver.status
-            msg = MotorStatus()
             msg.state = STATE_CODES.get(s.state, MotorStatus.STATE_UNKNOWN)
             msg.state_name = s.state_name
             msg.statusword, msg.operation_mode, msg.commanded_mode = s.statusword, s.operation_mode, s.commanded_mode
             msg.position, msg.velocity, msg.current, msg.torque = s.position, s.velocity, s.current, s.torque
             msg.fault_code, msg.fault_text = s.fault_code, s.fault_text
             msg.heartbeat_ok = bool(s.heartbeat_ok and self._driver.heartbeat.alive)
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.header.frame_id = "hip"
+        stamp_of_ns(self.get_clock().now().nanoseconds, msg.header.stamp)
         self._status_pub.publish(msg)
 
     def _publish_diagnostics(self) -> None:
