@@ -1,0 +1,106 @@
+"""Scores `hopper diagnose` on recordings of plant B (test/plant_b/): a second plant written blind, from the
+thesis alone, by an author who read neither the diagnosis code, the effect library nor the first independent
+plant, with effects in its own parameterisation, many of them no library entry has.
+
+What counts as right, per plant-B effect: a library entry that models the same law, named (or listed as not
+separable from the one named) with its magnitude within 20 % once converted; where the plant's law is not a
+library law, the library entry that is its nearest look-alike (its magnitude is not comparable) or terms
+discovered where it acts. A verdict matching no concealed effect is a false positive. The rows feed
+`diagnosis_suite.summarise`.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+G, TOE_MASS, BODY_MASS = 11.42, 0.03, 2.20       # config/model.yaml, the plant's nominal model
+
+
+# plant-B effect id -> ({library entry: magnitude converter, or None for a look-alike of another law},
+#                       discovered sites that are right for it)
+MATCH = {
+    "quadratic_air_drag": ({"quadratic_drag": lambda m: m}, set()),
+    "boom_descent_drag": ({"flight_damping_vertical": None}, {"flight_vertical"}),
+    "effective_gravity_error": ({"effective_gravity": lambda m: G * (1 + m)}, set()),
+    "softening_leg_spring": ({"spring_cubic": None, "leg_stiffness": None}, {"stance_along"}),
+    "extension_extra_damping": ({"leg_damping": None, "quadratic_leg_damping": None}, {"stance_along"}),
+    # an unsprung toe stopped at touchdown: v_along+ = v_along- m_b / (m_b + m_u)
+    "unsprung_toe_impact": ({"touchdown_loss_along": lambda m: m / (BODY_MASS + m)}, {"touchdown_along"}),
+    "undulating_floor": ({"ground_height": None}, {"touchdown_along", "touchdown_timing"}),
+    "backemf_torque_speed": ({"hip_viscous_friction": None, "torque_gain": None}, {"stance_hip"}),
+    "torque_deadband": ({"torque_offset": None, "hip_dry_friction": None, "torque_gain": None}, {"stance_hip"}),
+    "harder_liftoff_collision": ({"liftoff_collision": lambda m: TOE_MASS + m}, {"liftoff_along", "liftoff_across"}),
+    "z_sensor_scale": ({"z_scale": lambda m: 1 + m}, set()),
+    "theta_sensor_delay": ({"theta_delay": lambda m: m}, set()),
+    "theta_encoder_backlash": ({"theta_delay": None, "theta_offset": None}, {"stance_hip"}),
+    "hip_cogging_ripple": ({}, {"stance_hip"}),
+    "spring_stiffness_drift": ({"leg_stiffness": None}, {"stance_along"}),
+    "hip_torque_axial_coupling": ({}, {"stance_along"}),
+    "boom_ringing_after_liftoff": ({}, {"flight_vertical", "flight_horizontal"}),
+    "umbilical_tether_pull": ({"boom_friction_horizontal": None, "flight_damping_horizontal": None},
+                              {"flight_horizontal"}),
+}
+
+
+def score(result: dict, truth: dict) -> dict:
+    """Hits (with how: magnitude within 20 %, look-alike or discovered), misses and false positives."""
+    used, hits, misses = set(), [], []
+    for effect in truth["effects"]:
+        names, sites = MATCH.get(effect["id"], ({}, set()))
+        found = None
+        for k, r in enumerate(result["chosen"]):
+            for option in [r] + list(r.get("ties", [])):
+                c = option["candidate"]
+                if c.name in names:
+                    convert = names[c.name]
+                    if convert is None:
+                        found = (k, f"{c.name} {option['magnitude']:.4g} (look-alike)")
+                    else:
+                        want = convert(float(effect["magnitude"]))
+                        if abs(option["magnitude"] - want) <= 0.2 * abs(want):
+                            found = (k, f"{c.name} {option['magnitude']:.4g} (true {want:.4g})")
+                elif c.kind == "discovered" and c.site in sites:
+                    found = (k, f"{c.name}: {c.describe(option['value'])}")
+                if found:
+                    break
+            if found:
+                break
+        if found:
+            used.add(found[0])
+            hits.append((effect["id"], found[1]))
+        else:
+            misses.append((effect["id"], effect["magnitude"]))
+    false = [r["name"] for k, r in enumerate(result["chosen"]) if k not in used]
+    return {"hits": hits, "misses": misses, "false_positives": false, "located": [], "effects": len(truth["effects"]),
+            "clean": not truth["effects"], "physics_only": not any(e["site"].startswith("sensor")
+                                                                    for e in truth["effects"])}
+
+
+def run(folder: Path, names=None, verbose: bool = True) -> dict:
+    from diagnosis_suite import summarise
+
+    from hopper_ros.diagnosis import diagnose_file
+
+    rows = []
+    for truth_path in sorted(folder.glob("*.json")):
+        if names and truth_path.stem not in names:
+            continue
+        truth = json.loads(truth_path.read_text())
+        result = diagnose_file(truth_path.with_suffix(".csv"))
+        s = score(result, truth)
+        s.update(name=truth_path.stem, seconds=result["wall_time"], verdict=result["verdict"],
+                 before=result["before"], after=result["after"])
+        if verbose:
+            print(f"{s['name']}: {len(s['hits'])}/{s['effects']} {s['hits']} missed {s['misses']} false "
+                  f"{s['false_positives']}, {s['seconds']:.0f} s | {s['verdict']}", flush=True)
+        rows.append(s)
+    return summarise(rows)
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(REPO / "bench"))
+    summary = run(Path(sys.argv[1]), sys.argv[2:] or None)
+    print(json.dumps({k: v for k, v in summary.items() if k != "rows"}, indent=1))
