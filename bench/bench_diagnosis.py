@@ -12,8 +12,11 @@
   diagnose_independent_locate_pct, diagnose_independent_pair_hit_rate_pct (both effects of the
   recordings with two), diagnose_independent_worse_count (recordings whose held-out E_p/E_v/E_t got
   worse after an accepted effect)
+- on plant B (test/plant_b/, written blind, bench/plant_b_suite.py): diagnose_plant_b_hit_rate_pct,
+  diagnose_plant_b_false_positive_pct, diagnose_plant_b_worse_count
 --quick: the timing and a few cases of each.
 """
+import subprocess
 import sys
 import tempfile
 import time
@@ -26,11 +29,13 @@ sys.path.insert(0, str(REPO / "test"))
 
 import diagnosis_sim_sweep  # noqa: E402
 import diagnosis_suite  # noqa: E402
+import plant_b_suite  # noqa: E402
 
 from hopper_ros.diagnosis import diagnose_file  # noqa: E402
 
 QUICK_SIM = ("clean_a", "leg_friction", "torque_gain", "quadratic_drag+torque_gain")
 QUICK_INDEPENDENT = ("clean_1", "flight_air_drag", "actuator_gain", "other_flight_lift", "pair_drag_gain")
+QUICK_PLANT_B = ("clean", "s01_quadratic_drag", "s02_boom_descent_drag")
 
 
 def run(quick=False):
@@ -55,6 +60,14 @@ def run(quick=False):
              {"name": "diagnose_independent_pair_hit_rate_pct", "value": round(ind["pair_hit_rate_pct"], 1),
               "unit": "%"},
              {"name": "diagnose_independent_worse_count", "value": len(ind["worse_after"]), "unit": "recordings"}]
+    folder = Path(tempfile.mkdtemp())
+    subprocess.run([sys.executable, str(REPO / "test" / "plant_b" / "suite.py"), str(folder),
+                    *(QUICK_PLANT_B if quick else ())], check=True, capture_output=True)
+    blind = plant_b_suite.run(folder)
+    rows += [{"name": "diagnose_plant_b_hit_rate_pct", "value": round(blind["hit_rate_pct"], 1), "unit": "%"},
+             {"name": "diagnose_plant_b_false_positive_pct", "value": round(blind["false_positive_pct"], 1),
+              "unit": "%"},
+             {"name": "diagnose_plant_b_worse_count", "value": len(blind["worse_after"]), "unit": "recordings"}]
     return rows
 
 
