@@ -415,7 +415,7 @@ def _predict_aas_scalar(params: ModelParams, apex_height: float, forward_speed: 
     c = _constants
     if c is None or c.params is not params:
         c = _constants = _Constants(params)
-    m, g, k, d, rho_0 = params.body_mass, params.gravity, params.stiffness, params.damping, params.rest_length
+    k, d, rho_0 = params.stiffness, params.damping, params.rest_length
     m_rho_sq, k_over_m, two_m, forcing_0, four_rho_0, k_sq, two_k, m_g = (
         c.m_rho_sq, c.k_over_m, c.two_m, c.forcing_0, c.four_rho_0, c.k_sq, c.two_k, c.m_g)
     exp, cos, sin, acos, sqrt, atan2 = math.exp, math.cos, math.sin, math.acos, math.sqrt, math.atan2
