@@ -77,7 +77,9 @@ def _executor():
 
 
 def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] | None = None) -> int:  # noqa: F821
-    """Run one node until SIGINT/SIGTERM; returns the process exit status (0: clean stop)."""
+    """Run one node until SIGINT/SIGTERM; returns the process exit status (0: clean stop). A factory
+    may return a list of nodes (a container: all on the one executor, the first one logs; its
+    `spinning()`, if any, is called once they are added)."""
     try:
         apply_ros_environment()
         scheduling = apply_realtime_priority()   # before rclpy: its threads inherit the policy
@@ -93,12 +95,15 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
     from rclpy.signals import SignalHandlerOptions
 
     node = None
+    nodes = []
     executor = None
     status = 0
     try:
         rclpy.init(args=list(args) if args is not None else None, signal_handler_options=SignalHandlerOptions.NO)
         if stop.received is None:
-            node = node_factory()
+            built = node_factory()
+            nodes = list(built) if isinstance(built, (list, tuple)) else [built]
+            node = nodes[0]
             executor, spin_period = _executor()
             if spin_period == _SPIN_PERIOD:
                 stop.attach(node)
@@ -107,8 +112,11 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
                 f"discovery range {dds_network()}"
             )
             node.get_logger().info(f"scheduling: {scheduling}")
-            executor.add_node(node)
-            while stop.received is None and node.context.ok() and not getattr(node, "finished", False):
+            for each in nodes:
+                executor.add_node(each)
+            getattr(built, "spinning", lambda: None)()
+            while (stop.received is None and node.context.ok()
+                   and not any(getattr(each, "finished", False) for each in nodes)):
                 executor.spin_once(timeout_sec=spin_period)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -125,8 +133,8 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
         stop.detach()
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)
-        if node is not None:
-            node.destroy_node()
+        for each in reversed(nodes):
+            each.destroy_node()
         gc.collect()    # a node whose constructor failed (bad config) is freed while its context lives: left to the
         rclpy.try_shutdown()   # interpreter's exit, rcl handles outlive their context and the process may crash
         stop.uninstall()
