@@ -60,6 +60,7 @@ killed, Linux sends each node SIGTERM (PR_SET_PDEATHSIG).
 from __future__ import annotations
 
 import errno
+import json
 import math
 import os
 import re
@@ -81,9 +82,12 @@ from hopper_ros.environment import REALTIME_PRIORITY_VAR, RosEnvironmentError, a
 PACKAGE = "hopper_ros"
 DEFAULT_SIGINT_TIMEOUT = 5.0       # launch's default sigterm_timeout: SIGINT -> SIGTERM
 DEFAULT_SIGTERM_TIMEOUT = 5.0      # launch's default sigkill_timeout: SIGTERM -> SIGKILL
-_ENTITIES = ("arg", "let", "node")
+_ENTITIES = ("arg", "let", "node", "node_container")
+CONTAINER = "component_container"   # our container executable (hopper_ros/nodes/component_container.py)
 _NODE_KEYS = {"pkg", "exec", "name", "namespace", "param", "remap", "env", "args", "ros_args", "output", "on_exit",
               "sigterm_timeout", "sigkill_timeout", "if", "unless"}
+_CONTAINER_KEYS = (_NODE_KEYS - {"args"}) | {"composable_node"}
+_COMPOSABLE_KEYS = {"pkg", "plugin", "name", "namespace", "param", "remap", "extra_arg", "if", "unless"}
 _ARG_KEYS = {"name", "default", "description", "if", "unless"}
 _LET_KEYS = {"name", "value", "if", "unless"}
 _OUTPUTS = {"screen", "log", "both", "own_log"}
@@ -292,36 +296,107 @@ def _timeout(entity: dict, key: str, where: str) -> float | None:
     return float(value)
 
 
-def _node(context: _Context, entity: dict, where: str, env: dict[str, str]) -> tuple[ChildSpec, float | None, float | None]:
-    from hopper_ros.nodes.registry import NODES
-
-    if "realtime_priority" in entity:   # the key of our former launch format
-        raise LaunchFileError(f"{where}: 'realtime_priority' is not a key of ros2 launch's node: give the SCHED_FIFO "
-                              f"priority as env [{{name: {REALTIME_PRIORITY_VAR}, value: \"N\"}}]")
-    _check_keys(entity, _NODE_KEYS, "node", where)
-    package = _string(context, entity, "pkg", where, required=True)
-    if package != PACKAGE:
-        raise LaunchFileError(f"{where}: pkg {package!r}: hopper launch starts the nodes of {PACKAGE} only")
-    executable = _string(context, entity, "exec", where, required=True)
-    if executable not in NODES:
-        raise LaunchFileError(f"{where}: unknown exec {executable!r}; {PACKAGE}'s nodes: {', '.join(sorted(NODES))}")
-    where = f"{where} ({executable})"
-    ros_args: list[str] = []
-    name, namespace = _string(context, entity, "name", where), _string(context, entity, "namespace", where)
+def _names(context: _Context, entity: dict, where: str, ros_args: list[str], required: bool = False) -> tuple[str | None, str | None]:
+    """`name` and `namespace` as `-r __node:=` / `-r __ns:=` (namespace made absolute)."""
+    name = _string(context, entity, "name", where, required=required)
+    if required and "namespace" not in entity:
+        raise LaunchFileError(f"{where}: missing 'namespace' (launch_ros requires it of a container; '' for none)")
+    namespace = _string(context, entity, "namespace", where)
     if name:
         ros_args += ["-r", f"__node:={name}"]
     if namespace:
         namespace = namespace if namespace.startswith("/") else "/" + namespace
         if namespace != "/":
             ros_args += ["-r", f"__ns:={namespace}"]
+    return name, namespace
+
+
+def _params_and_remaps(context: _Context, entity: dict, where: str, ros_args: list[str]) -> None:
     if "param" in entity:
         _params(context, _entity_list(entity["param"], "param", where), "", where, ros_args)
     for item in _entity_list(entity["remap"], "remap", where) if "remap" in entity else []:
         _check_keys(item, {"from", "to"}, "remap", where)
         ros_args += ["-r", f"{_string(context, item, 'from', where, True)}:={_string(context, item, 'to', where, True)}"]
+
+
+def _label(name: str | None, namespace: str | None, default: str) -> str:
+    return (namespace.strip("/") + "/" if namespace and namespace != "/" else "") + (name or default)
+
+
+def _composable_node(context: _Context, entity: Any, where: str) -> tuple[dict, str] | None:
+    """One `composable_node` of a container: (its --components entry, its label), None if its condition is false."""
+    from hopper_ros.nodes.registry import COMPONENTS
+
+    if not isinstance(entity, dict):
+        raise LaunchFileError(f"{where}: a composable_node is a mapping of its attributes")
+    _check_keys(entity, _COMPOSABLE_KEYS, "composable_node", where)
+    if not context.condition(entity, where):
+        return None
+    package = _string(context, entity, "pkg", where, required=True)
+    if package != PACKAGE:
+        raise LaunchFileError(f"{where}: pkg {package!r}: the container loads {PACKAGE}'s nodes only")
+    plugin = _string(context, entity, "plugin", where, required=True)
+    if plugin not in COMPONENTS:
+        raise LaunchFileError(f"{where}: unknown plugin {plugin!r}; {PACKAGE}'s: {', '.join(sorted(COMPONENTS))}")
+    where = f"{where} ({plugin})"
+    args: list[str] = []
+    name, namespace = _names(context, entity, where, args)
+    if not name:
+        raise LaunchFileError(f"{where}: missing 'name' (launch_ros requires it of a composable_node)")
+    _params_and_remaps(context, entity, where, args)
+    intra_process = False
+    for item in _entity_list(entity["extra_arg"], "extra_arg", where) if "extra_arg" in entity else []:
+        _check_keys(item, {"name", "value"}, "extra_arg", where)
+        key, value = _string(context, item, "name", where, True), str(item.get("value", "")).strip().lower()
+        if key != "use_intra_process_comms" or value not in ("true", "false"):
+            raise LaunchFileError(f"{where}: extra_arg {key!r}: {value!r}: hopper launch supports only "
+                                  f"use_intra_process_comms, 'true' or 'false'")
+        intra_process = value == "true"
+    return {"plugin": plugin, "args": args, "intra_process": intra_process}, _label(name, namespace, name)
+
+
+def _node(context: _Context, entity: dict, where: str, env: dict[str, str],
+          kind: str = "node") -> tuple[ChildSpec, float | None, float | None, list[str]]:
+    """A `node` or `node_container`: (the process, its sigterm/sigkill timeouts, the labels of its nodes)."""
+    from hopper_ros.nodes.registry import NODES
+
+    if "realtime_priority" in entity:   # the key of our former launch format
+        raise LaunchFileError(f"{where}: 'realtime_priority' is not a key of ros2 launch's node: give the SCHED_FIFO "
+                              f"priority as env [{{name: {REALTIME_PRIORITY_VAR}, value: \"N\"}}]")
+    container = kind == "node_container"
+    _check_keys(entity, _CONTAINER_KEYS if container else _NODE_KEYS, kind, where)
+    package = _string(context, entity, "pkg", where, required=True)
+    executable = _string(context, entity, "exec", where, required=True)
+    if container and (package, executable) != (PACKAGE, CONTAINER):
+        raise LaunchFileError(f"{where}: pkg {package!r} exec {executable!r}: a container of Python nodes is "
+                              f"pkg: {PACKAGE}, exec: {CONTAINER} (rclcpp_components' containers load C++ nodes only)")
+    if package != PACKAGE:
+        raise LaunchFileError(f"{where}: pkg {package!r}: hopper launch starts the nodes of {PACKAGE} only")
+    if executable not in NODES or (executable == CONTAINER and not container):
+        known = ", ".join(sorted(set(NODES) - {CONTAINER}))
+        raise LaunchFileError(f"{where}: unknown exec {executable!r}; {PACKAGE}'s nodes: {known}"
+                              + (f" ({CONTAINER}: a node_container entry)" if executable == CONTAINER else ""))
+    where = f"{where} ({executable})"
+    ros_args: list[str] = []
+    name, namespace = _names(context, entity, where, ros_args, required=container)
+    _params_and_remaps(context, entity, where, ros_args)
     if "ros_args" in entity:
         ros_args += shlex.split(_string(context, entity, "ros_args", where) or "")
     extra = shlex.split(_string(context, entity, "args", where) or "") if "args" in entity else []
+    labels = [_label(name, namespace, executable)]
+    if container:
+        components = []
+        items = entity.get("composable_node")
+        if not isinstance(items, list) or not items:
+            raise LaunchFileError(f"{where}: 'composable_node' must be a non-empty list of composable nodes")
+        for number, item in enumerate(items, start=1):
+            loaded = _composable_node(context, item, f"{where}, composable_node {number}")
+            if loaded is not None:
+                components.append(loaded[0])
+                labels.append(loaded[1])
+        if not components:
+            raise LaunchFileError(f"{where}: no composable_node to load")
+        extra = ["--components", json.dumps(components)]
     output = _string(context, entity, "output", where)
     if output is not None and output not in _OUTPUTS:
         raise LaunchFileError(f"{where}: 'output' must be one of {', '.join(sorted(_OUTPUTS))}, got {output!r}")
@@ -338,9 +413,8 @@ def _node(context: _Context, entity: dict, where: str, env: dict[str, str]) -> t
             realtime_priority(child_env)
         except RosEnvironmentError as exc:
             raise LaunchFileError(f"{where}: {exc}") from None
-    label = (namespace.strip("/") + "/" if namespace and namespace != "/" else "") + (name or executable)
-    spec = ChildSpec(label, node_command(executable, ros_args, extra), child_env)
-    return spec, _timeout(entity, "sigterm_timeout", where), _timeout(entity, "sigkill_timeout", where)
+    spec = ChildSpec(labels[0], node_command(executable, ros_args, extra), child_env)
+    return spec, _timeout(entity, "sigterm_timeout", where), _timeout(entity, "sigkill_timeout", where), labels
 
 
 def parse_launch(data: Any, source: str = "<launch>", base_dir: Path | None = None,
@@ -351,7 +425,7 @@ def parse_launch(data: Any, source: str = "<launch>", base_dir: Path | None = No
         raise LaunchFileError(f"{source}: expected one root key 'launch' (ros2 launch's YAML format), found {found}")
     entities = data["launch"]
     if not isinstance(entities, list) or not entities:
-        raise LaunchFileError(f"{source}: 'launch' must be a non-empty list of entities (arg, let, node)")
+        raise LaunchFileError(f"{source}: 'launch' must be a non-empty list of entities ({', '.join(_ENTITIES)})")
     context = _Context(source, base_dir, arguments or {})
     env = _child_env()
     children: list[ChildSpec] = []
@@ -388,11 +462,12 @@ def parse_launch(data: Any, source: str = "<launch>", base_dir: Path | None = No
         else:
             if not context.condition(entity, where):
                 continue
-            spec, term, kill = _node(context, entity, where, env)
-            if spec.label in labels:
-                raise LaunchFileError(f"{where}: a node {spec.label!r} is already started by entry {labels[spec.label]}; "
-                                      f"give the nodes distinct names or namespaces")
-            labels[spec.label] = index
+            spec, term, kill, names = _node(context, entity, where, env, kind)
+            for label in names:
+                if label in labels:
+                    raise LaunchFileError(f"{where}: a node {label!r} is already started by entry {labels[label]}; "
+                                          f"give the nodes distinct names or namespaces")
+                labels[label] = index
             children.append(spec)
             sigterm += [term] if term is not None else []
             sigkill += [kill] if kill is not None else []
