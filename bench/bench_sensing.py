@@ -1,5 +1,5 @@
 """The sensing half of the 1 kHz loop: per-sample cost of each stage, and packet-to-event latency
-through the three nodes in separate processes.
+through the three nodes composed in one process and in separate processes.
 
 Per-sample cost (plain modules, this process, no ROS): SimRobot's packets of section 4.1's
 single-stride experiments (thrown anew after each) through EncoderBridge.process
@@ -31,6 +31,14 @@ sensing_source_rate_hz. 60 s of packets (quick: 10 s). The same (30 s) with norm
 rclpy's SingleThreadedExecutor (HOPPER_EXECUTOR=single) instead of run_node's default events
 executor: packet_to_event_p50_us_single_executor, _p99_us_single_executor,
 deadline_miss_pct_single_executor.
+
+Composed (issue 19): the three nodes in one component_container (hopper_ros/nodes/component_container.py,
+what a launch file's node_container starts), the hand-over in-process (use_intra_process_comms:
+hopper_ros/nodes/intra_process.py; every message still on DDS for the sink): packet_to_event_p50_us_composed,
+_p99_us_composed (target < 1000 us), _max_us_composed, deadline_miss_pct_composed (target < 0.5 %),
+events_measured_composed, 60 s (quick 10 s) on SCHED_FIFO as the main run; the same 30 s with normal
+scheduling (*_composed_normal_scheduling); and composed with the hand-over through DDS (30 s, SCHED_FIFO:
+*_composed_dds), what one process saves without the in-process path.
 """
 import json
 import os
@@ -54,6 +62,7 @@ WARMUP_S = 1.0
 PERIOD_S = 1e-3
 START_TIMEOUT_S = 60.0
 NODES = ("encoder_bridge", "state_estimator", "event_detector")
+COMPONENTS = ("hopper_ros::EncoderBridge", "hopper_ros::StateEstimator", "hopper_ros::EventDetector")
 REALTIME_PRIORITY = 50   # SCHED_FIFO of every process of the main run, as in launch/demo.launch.yaml
 
 
@@ -111,11 +120,23 @@ def _free_port():
         return probe.getsockname()[1]
 
 
-def latency(duration, executor="events", realtime_priority=0):
+def _container_command(namespace, port, intra_process):
+    """The three nodes composed in one component_container, as a launch file's node_container."""
+    components = [{"plugin": plugin, "intra_process": intra_process,
+                   "args": ["-r", f"__node:={name}", "-r", f"__ns:={namespace}"]
+                   + (["-p", f"port:={port}"] if name == "encoder_bridge" else [])}
+                  for name, plugin in zip(NODES, COMPONENTS)]
+    return [sys.executable, "-m", "hopper_ros.cli", "run", "component_container", "--ros-args",
+            "-r", "__node:=sensing", "-r", f"__ns:={namespace}", "--", "--components", json.dumps(components)]
+
+
+def latency(duration, executor="events", realtime_priority=0, composed=None):
     """The three nodes as `hopper run` starts them (hopper_ros.nodes.common.run_node), on rclpy's
     events executor (its default) or, with executor="single", HOPPER_EXECUTOR=single; with a
-    realtime_priority every process of the run (nodes, source, sink) on SCHED_FIFO at it."""
-    namespace = f"/bench_sensing_{os.getpid()}_{executor}_{realtime_priority}"
+    realtime_priority every process of the run (nodes, source, sink) on SCHED_FIFO at it.
+    composed: None (three processes), "intra_process" or "dds" (one container, the hand-over
+    in-process or through DDS)."""
+    namespace = f"/bench_sensing_{os.getpid()}_{executor}_{realtime_priority}_{composed or 'separate'}"
     port = _free_port()
     env = child_env(unbuffered=True)
     env["HOPPER_EXECUTOR"] = executor
@@ -124,10 +145,13 @@ def latency(duration, executor="events", realtime_priority=0):
     nodes = []
     sink = None
     try:
-        for name in NODES:
+        commands = [_container_command(namespace, port, composed == "intra_process")] if composed else []
+        for name in NODES if not composed else ():
             args = [sys.executable, "-m", "hopper_ros.cli", "run", name, "--ros-args", "-r", f"__ns:={namespace}"]
             if name == "encoder_bridge":
                 args += ["-p", f"port:={port}"]
+            commands.append(args)
+        for args in commands:
             nodes.append(subprocess.Popen(args, cwd=REPO, env=env, stdin=subprocess.DEVNULL,
                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         sink = subprocess.Popen([sys.executable, me, "sink", namespace, str(duration)], cwd=REPO, env=env,
@@ -331,7 +355,22 @@ def run(quick=False):
     normal = latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S)
     floor = floor_latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S, realtime_priority=priority)
     variant = latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S, executor="single")
-    return [
+    composed = latency(QUICK_DURATION_S if quick else DURATION_S, realtime_priority=priority, composed="intra_process")
+    composed_normal = latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S, composed="intra_process")
+    composed_dds = latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S, realtime_priority=priority,
+                           composed="dds")
+
+    def chain(suffix, measured):
+        return [{"name": f"packet_to_event_p50_us_{suffix}",
+                 "value": round(percentile(measured["event_latency"], 0.50), 1), "unit": "us"},
+                {"name": f"packet_to_event_p99_us_{suffix}",
+                 "value": round(percentile(measured["event_latency"], 0.99), 1), "unit": "us"},
+                {"name": f"deadline_miss_pct_{suffix}", "value": round(measured["deadline_miss_pct"], 3), "unit": "%"}]
+
+    return chain("composed", composed) + chain("composed_normal_scheduling", composed_normal) + [
+        {"name": "packet_to_event_max_us_composed", "value": round(composed["event_latency"][-1], 1), "unit": "us"},
+        {"name": "events_measured_composed", "value": len(composed["event_latency"]), "unit": "events"},
+    ] + chain("composed_dds", composed_dds) + [
         {"name": "bridge_sample_us", "value": round(costs["bridge_sample_us"], 1), "unit": "us"},
         {"name": "estimator_sample_us", "value": round(costs["estimator_sample_us"], 1), "unit": "us"},
         {"name": "detector_sample_us", "value": round(costs["detector_sample_us"], 1), "unit": "us"},
