@@ -296,7 +296,8 @@ def _timeout(entity: dict, key: str, where: str) -> float | None:
     return float(value)
 
 
-def _names(context: _Context, entity: dict, where: str, ros_args: list[str], required: bool = False) -> tuple[str | None, str | None]:
+def _names(context: _Context, entity: dict, where: str, ros_args: list[str],
+           required: bool = False) -> tuple[str | None, str | None]:
     """`name` and `namespace` as `-r __node:=` / `-r __ns:=` (namespace made absolute)."""
     name = _string(context, entity, "name", where, required=required)
     if required and "namespace" not in entity:

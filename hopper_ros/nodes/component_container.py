@@ -61,16 +61,17 @@ def parse_components(text: str) -> list[dict]:
 class Composition(list):
     """The container node first, then the composed nodes; `spinning()` flushes early messages."""
 
-    def __init__(self, components: list[dict]):
+    def __init__(self, components: list[dict], context=None):
         super().__init__()
-        container = Node("component_container", start_parameter_services=False)
+        container = Node("component_container", start_parameter_services=False, context=context)
         self.append(container)
         self.bus = IntraProcessBus(container.get_logger())
         try:
             for item in components:
                 node_class = composable(component_class(item["plugin"]), self.bus, item.get("intra_process", False))
                 try:
-                    node = node_class(cli_args=["--ros-args", *item.get("args", [])], use_global_arguments=False)
+                    node = node_class(cli_args=["--ros-args", *item.get("args", [])], use_global_arguments=False,
+                                      context=context)
                 except (ValueError, OSError) as exc:
                     raise type(exc)(f"{item['plugin']}: {exc}") from exc
                 self.append(node)
