@@ -39,6 +39,11 @@ _p99_us_composed (target < 1000 us), _max_us_composed, deadline_miss_pct_compose
 events_measured_composed, 60 s (quick 10 s) on SCHED_FIFO as the main run; the same 30 s with normal
 scheduling (*_composed_normal_scheduling); and composed with the hand-over through DDS (30 s, SCHED_FIFO:
 *_composed_dds), what one process saves without the in-process path.
+
+The hand-over alone (20 s, quick 5 s, SCHED_FIFO as the main run): two nodes composed in one process,
+a thread publishing BodyMeasurement at 1 kHz as the bridge's receiving thread does, the other node's
+callback noting now - stamp: composed_handover_p50_us / _p99_us and the process's CPU per message
+composed_handover_cpu_us (in-process), the same through DDS inside the process (*_dds).
 """
 import json
 import os
@@ -57,6 +62,8 @@ DURATION_S = 60.0
 QUICK_DURATION_S = 10.0
 VARIANT_DURATION_S = 30.0
 COST_DURATION_S = 30.0
+HANDOVER_S = 20.0
+HANDOVER_QUICK_S = 5.0
 QUICK_COST_DURATION_S = 6.0
 WARMUP_S = 1.0
 PERIOD_S = 1e-3
@@ -343,6 +350,84 @@ def _floor(role, namespace, source, target, duration):
     rclpy.shutdown()
 
 
+# ---------------------------------------------------------------------------- the hand-over alone
+
+def handover_latency(duration, intra_process, realtime_priority=0):
+    """One hop between two nodes composed in one process (hopper_ros.nodes.intra_process), in-process
+    or through DDS: (latency publish -> callback in us, sorted; CPU of the process per message in us)."""
+    env = child_env(unbuffered=True)
+    env["HOPPER_REALTIME_PRIORITY"] = str(realtime_priority)
+    output = subprocess.run([sys.executable, os.path.abspath(__file__), "handover", str(duration), str(int(intra_process))],
+                            cwd=REPO, env=env, stdout=subprocess.PIPE, text=True, check=True,
+                            timeout=duration + START_TIMEOUT_S).stdout
+    result = json.loads(output.strip().splitlines()[-1])
+    return sorted(result["latency_us"]), result["cpu_us_per_message"]
+
+
+def _handover(duration, intra_process):
+    """A sender thread publishing BodyMeasurement at 1 kHz (as the bridge's receiving thread does) and
+    a receiver noting now - stamp, both nodes of one container's bus, on the events executor."""
+    import threading
+
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+    from rclpy.node import Node
+
+    from hopper_ros.msg import BodyMeasurement
+    from hopper_ros.nodes.intra_process import IntraProcessBus, composable
+    from hopper_ros.nodes.sensing_messages import sample_qos
+
+    class Sender(Node):
+        def __init__(self, **kwargs):
+            super().__init__("handover_sender", **kwargs)
+            self.publisher = self.create_publisher(BodyMeasurement, "handover", sample_qos(100))
+
+    class Receiver(Node):
+        def __init__(self, **kwargs):
+            super().__init__("handover_receiver", **kwargs)
+            self.latency = []
+            self.create_subscription(BodyMeasurement, "handover", self._on_message, sample_qos(100))
+
+        def _on_message(self, msg):
+            self.latency.append((time.time_ns() - msg.header.stamp.sec * 1_000_000_000 - msg.header.stamp.nanosec) / 1e3)
+
+    rclpy.init()
+    bus = IntraProcessBus(rclpy.logging.get_logger("handover"))
+    namespace = f"/bench_handover_{os.getpid()}"
+    sender = composable(Sender, bus, intra_process)(namespace=namespace, start_parameter_services=False)
+    receiver = composable(Receiver, bus, intra_process)(namespace=namespace, start_parameter_services=False)
+    executor = EventsExecutor()
+    executor.add_node(sender)
+    executor.add_node(receiver)
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while not sender.publisher.get_subscription_count() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+    count = int(duration / PERIOD_S)
+    cpu = []
+
+    def send():
+        msg = BodyMeasurement()
+        time.sleep(0.5)
+        cpu.append(time.process_time())
+        for index in Paced(count, PERIOD_S):
+            msg.sequence = index
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
+            sender.publisher.publish(msg)
+        time.sleep(0.2)
+
+    thread = threading.Thread(target=send)
+    thread.start()
+    while thread.is_alive() or len(receiver.latency) < count and time.monotonic() < deadline + duration + 5:
+        executor.spin_once(timeout_sec=0.05)
+    cpu_s = time.process_time() - cpu[0]
+    print(json.dumps({"latency_us": receiver.latency[int(WARMUP_S / PERIOD_S):],
+                      "cpu_us_per_message": 1e6 * cpu_s / max(1, len(receiver.latency))}), flush=True)
+    executor.shutdown()
+    receiver.destroy_node()
+    sender.destroy_node()
+    rclpy.shutdown()
+
+
 def run(quick=False):
     from hopper_ros.environment import realtime_scheduling_allowed
 
@@ -359,6 +444,8 @@ def run(quick=False):
     composed_normal = latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S, composed="intra_process")
     composed_dds = latency(QUICK_DURATION_S if quick else VARIANT_DURATION_S, realtime_priority=priority,
                            composed="dds")
+    handover = {mode: handover_latency(HANDOVER_QUICK_S if quick else HANDOVER_S, mode == "intra_process", priority)
+                for mode in ("intra_process", "dds")}
 
     def chain(suffix, measured):
         return [{"name": f"packet_to_event_p50_us_{suffix}",
@@ -371,6 +458,10 @@ def run(quick=False):
         {"name": "packet_to_event_max_us_composed", "value": round(composed["event_latency"][-1], 1), "unit": "us"},
         {"name": "events_measured_composed", "value": len(composed["event_latency"]), "unit": "events"},
     ] + chain("composed_dds", composed_dds) + [
+        {"name": f"composed_handover_{figure}_us{'' if mode == 'intra_process' else '_dds'}", "unit": "us",
+         "value": round(percentile(handover[mode][0], q) if q else handover[mode][1], 1)}
+        for mode in ("intra_process", "dds") for figure, q in (("p50", 0.50), ("p99", 0.99), ("cpu", None))
+    ] + [
         {"name": "bridge_sample_us", "value": round(costs["bridge_sample_us"], 1), "unit": "us"},
         {"name": "estimator_sample_us", "value": round(costs["estimator_sample_us"], 1), "unit": "us"},
         {"name": "detector_sample_us", "value": round(costs["detector_sample_us"], 1), "unit": "us"},
@@ -406,7 +497,7 @@ def run(quick=False):
 if __name__ == "__main__":
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     role = sys.argv[1] if len(sys.argv) > 1 else "run"
-    if role in ("source", "sink", "floor_source", "floor_relay", "floor_end"):
+    if role in ("source", "sink", "floor_source", "floor_relay", "floor_end", "handover"):
         from hopper_ros.environment import apply_realtime_priority
 
         apply_realtime_priority()            # HOPPER_REALTIME_PRIORITY of the run, as the nodes
@@ -414,6 +505,8 @@ if __name__ == "__main__":
         _source(int(sys.argv[2]), float(sys.argv[3]))
     elif role == "sink":
         _sink(sys.argv[2], float(sys.argv[3]))
+    elif role == "handover":
+        _handover(float(sys.argv[2]), sys.argv[3] == "1")
     elif role.startswith("floor_"):
         _floor(role, sys.argv[2], sys.argv[3], sys.argv[4], float(sys.argv[5]))
     else:

@@ -1,8 +1,8 @@
 """Launch files and the process supervisor behind `hopper launch`. No ROS import.
 
-Launch files are ros2 launch's YAML front end (launch_yaml with launch_ros's `node`), so the same
-file runs with `ros2 launch hopper_ros demo.launch.yaml` on a machine with ROS 2 and with
-`hopper launch demo.launch.yaml` here. The files live in `launch/` (installed by CMake to
+Launch files are ros2 launch's YAML front end (launch_yaml with launch_ros's `node` and
+`node_container`), so a file of nodes runs with `ros2 launch hopper_ros FILE` on a machine with
+ROS 2 and with `hopper launch FILE` here (containers: hopper launch only, see below). The files live in `launch/` (installed by CMake to
 `share/hopper_ros/launch/`). What `hopper launch` supports of the format:
 
     launch:
@@ -33,6 +33,38 @@ file runs with `ros2 launch hopper_ros demo.launch.yaml` on a machine with ROS 2
           sigkill_timeout: 5          # s from SIGTERM to SIGKILL
           if: $(var with_sim)         # conditions (also on arg and let): true/false/1/0
           unless: ...
+      - node_container:               # several nodes in ONE process on ONE executor (launch_ros's
+          pkg: hopper_ros             #   ComposableNodeContainer); the keys of `node` but `args`
+          exec: component_container   # required: our container (see below)
+          name: sensing               # required, as in launch_ros (the container is a node too)
+          namespace: ""               # required, as in launch_ros ("" = none)
+          env: [...]                  # the process's: HOPPER_REALTIME_PRIORITY holds for every node in it
+          composable_node:            # loaded in this order (launch_ros's ComposableNode.parse)
+            - pkg: hopper_ros         # required: this package
+              plugin: hopper_ros::EncoderBridge   # required: COMPONENTS of hopper_ros/nodes/registry.py
+              name: encoder_bridge    # required
+              namespace: $(var ns)    # optional: the node's own; the container's is not inherited
+              param: [...]            # as for `node` (a `from` file too)
+              remap: [...]            # as for `node`, applied to this node only
+              extra_arg:              # only this one: the node's subscriptions take the container's
+                - {name: use_intra_process_comms, value: "true"}   # messages in-process (rclcpp's meaning)
+              if: ...                 # conditions, as for `node`
+
+A container runs `python -m hopper_ros.cli run component_container --ros-args ... -- --components
+JSON` (hopper_ros/nodes/component_container.py): each composable node built from its own class
+with its own arguments, all on run_node's executor, the hand-over between them in-process where
+use_intra_process_comms says so (hopper_ros/nodes/intra_process.py); each node stays runnable
+alone (`hopper run NODE`). What differs from ros2 launch, and why: in ROS the container is
+rclcpp_components' `component_container` and launch_ros loads the nodes into it through the
+container's `_container/load_node` service (composition_interfaces). An rclcpp container loads
+C++ classes only and composition_interfaces is not among the PyPI wheels, so `pkg:
+rclcpp_components` (and `component_container_mt`, `_isolated`: one executor here) is refused, the
+container is hopper_ros's own executable (also `ros2 run hopper_ros component_container`), and it
+takes its nodes on its command line, not by service: `ros2 launch` on a ROS 2 machine would start
+it without nodes and wait for the service, so files with a node_container run with `hopper
+launch` (demo_500hz.launch.yaml, all separate processes, runs under both). `load_composable_node`
+(loading into a running container) is not supported. A plugin is named like a C++ component's
+registered class (`hopper_ros::EncoderBridge`) and maps to a Python class in the registry.
 
 Substitutions: `$(var NAME)`, `$(env NAME [DEFAULT])`, `$(optenv NAME [DEFAULT])`,
 `$(find-pkg-share PKG)` (hopper_ros: the folder holding config/ and launch/), `$(dirname)`.

@@ -134,20 +134,15 @@ class IntraProcessBus:
                 self._topics[topic] = tuple(e for e in entries if not e.closed)
 
     def publisher(self, publisher):
-        """Wrap `publisher.publish`: DDS as before, then every in-process subscription of its topic."""
+        """Wrap `publisher.publish`: every in-process subscription of its topic, then DDS as before."""
         topic, msg_type, dds_publish = publisher.topic_name, publisher.msg_type, publisher.publish
         best_effort = publisher.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
 
         def publish(msg) -> None:
-            dds_publish(msg)
-            entries = self._topics.get(topic)
-            if not entries:
-                return
-            if isinstance(msg, bytes):
-                msg = deserialize_message(msg, msg_type)
-            for entry in entries:
+            for entry in self._topics.get(topic, ()):   # first, as rclcpp: the subscriber may run meanwhile
                 if entry.subscription.msg_type is msg_type and not (entry.reliable and best_effort):
-                    entry.offer(msg)
+                    entry.offer(deserialize_message(msg, msg_type) if isinstance(msg, bytes) else msg)
+            dds_publish(msg)
 
         publisher.publish = publish
         return publisher
