@@ -2,10 +2,11 @@
 
   hopper demo [--strides N] [-o DIR] [--launch FILE] [--timeout S]
 
-Starts the whole graph as separate processes with our launcher (`launch/demo.launch.yaml`, 1 kHz
-with the loop's nodes on SCHED_FIFO; where that is not permitted `launch/demo_500hz.launch.yaml`:
-simulated robot, encoder bridge, state estimator, event detector, deadbeat controller, motor
-driver, setpoint scheduler; their log goes to DIR/launch.log), waits until the graph is up (state
+Starts the whole graph with our launcher (`launch/demo.launch.yaml`, 1 kHz with the loop's nodes
+on SCHED_FIFO, the encoder bridge, state estimator, event detector and deadbeat controller composed
+in one process, the simulated robot, motor driver and setpoint scheduler apart; where SCHED_FIFO is
+not permitted `launch/demo_500hz.launch.yaml`, every node its own process; the log goes to
+DIR/launch.log), waits until the graph is up (state
 estimates flowing, drive enabled, controller listening), throws the robot to the first setpoint's
 apex, follows it stride by stride (one progress line per apex), stops everything cleanly after N
 strides, then prints the per-stride table (apex height and speed against their setpoints) and

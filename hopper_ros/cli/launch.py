@@ -1,5 +1,5 @@
-"""`hopper launch [hopper_ros] FILE [NAME:=VALUE ...]`: start the nodes of a launch file as
-separate processes and supervise them, like `ros2 launch hopper_ros FILE NAME:=VALUE`.
+"""`hopper launch [hopper_ros] FILE [NAME:=VALUE ...]`: start the nodes of a launch file, each node
+or node_container a process, and supervise them, like `ros2 launch hopper_ros FILE NAME:=VALUE`.
 
 FILE is a path or a file of launch/ (`demo.launch.yaml`). Launch files are ros2 launch's YAML
 format; what is supported of it, output and stop behaviour: hopper_ros/launcher.py.
@@ -11,7 +11,7 @@ import argparse
 import shlex
 import sys
 
-HELP = "start the nodes of a launch file, each in its own process (like `ros2 launch`)"
+HELP = "start the nodes of a launch file, each node or container a process (like `ros2 launch`)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
