@@ -26,6 +26,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from hopper_ros.config import load_yaml  # noqa: E402
+from hopper_ros.hardware.config import load_hardware  # noqa: E402
 from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings  # noqa: E402
 from hopper_ros.harness.lockstep import run_closed_loop, summarise  # noqa: E402
 from hopper_ros.physics.params import load_params  # noqa: E402
@@ -35,7 +36,7 @@ from hopper_ros.sim.config import load_sim_config  # noqa: E402
 def run(quick=False):
     per_segment, repeats = (12, 1) if quick else (20, 3)
     schedule = ([(0.39, 2.0)] * per_segment + [(0.42, 2.0)] * per_segment + [(0.38, 2.5)] * per_segment) * repeats
-    hardware = load_yaml("hardware.yaml")
+    hardware = load_hardware()
     base = load_yaml("control.yaml")["deadbeat"]
     figures = []
     for adaptation in (True, False):

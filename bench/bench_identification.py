@@ -18,7 +18,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from hopper_ros.config import load_yaml  # noqa: E402
+from hopper_ros.hardware.config import load_hardware  # noqa: E402
 from hopper_ros.identification.crossval import cross_validate  # noqa: E402
 from hopper_ros.identification.fit import fit_parameters  # noqa: E402
 from hopper_ros.recording.recordings import load_bag  # noqa: E402
@@ -35,7 +35,7 @@ def run(quick=False):
     settings = load_settings().with_changes(folds=folds)
     with tempfile.TemporaryDirectory() as folder:
         started = time.perf_counter()
-        collect(Path(folder) / "bag", config, load_yaml("hardware.yaml"), CollectionSettings(strides=total, seed=0))
+        collect(Path(folder) / "bag", config, load_hardware(), CollectionSettings(strides=total, seed=0))
         collect_s = time.perf_counter() - started
         strides = extract_strides(load_bag(Path(folder) / "bag"), truth.rest_length, settings.extraction)
     assert len(strides) == total, f"{len(strides)} strides extracted of {total}"

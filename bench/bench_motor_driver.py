@@ -43,17 +43,17 @@ SPAN_MA = 8000
 
 def _torque_for(sequence, hardware):
     milliamps = BASE_MA + sequence % SPAN_MA
-    return milliamps / 1000.0 * hardware["motor"]["torque_constant"] * hardware["motor"]["gear_ratio"]
+    return milliamps / 1000.0 * hardware.motor.torque_constant * hardware.motor.gear_ratio
 
 
 def run(quick=False):
     from hopper_ros.canbus.epos2_emulator import Epos2Emulator
     from hopper_ros.canbus.epos2_objects import rpdo_cob_id
     from hopper_ros.canbus.socketcand_server import SocketcandServer
-    from hopper_ros.canbus.driver import load_hardware
+    from hopper_ros.hardware.config import load_hardware
 
     hardware = load_hardware()
-    node_id = hardware["drive"]["node_id"]
+    node_id = hardware.drive.node_id
     count = QUICK_COUNT if quick else COUNT
     total = WARMUP + count
     namespace = f"/hopper_bench_motor_{os.getpid()}"
@@ -130,7 +130,7 @@ def _publish(topic, total, rate_hz):
     import rclpy
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    from hopper_ros.canbus.driver import load_hardware
+    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.msg import MotorCommand
 
     hardware = load_hardware()

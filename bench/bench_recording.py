@@ -27,7 +27,7 @@ import yaml
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from hopper_ros.config import load_yaml  # noqa: E402
+from hopper_ros.hardware.config import load_hardware  # noqa: E402
 from hopper_ros.recording.recordings import load_bag  # noqa: E402
 from hopper_ros.msg import BodyMeasurement  # noqa: E402
 from hopper_ros.recording.bag import BagReader, BagWriter  # noqa: E402
@@ -131,7 +131,7 @@ def run(quick=False):
     with tempfile.TemporaryDirectory() as folder:
         written = write_rate(Path(folder) / "objects", count, raw=False)
         raw = write_rate(Path(folder) / "raw", count, raw=True)
-        collect(Path(folder) / "collected", load_sim_config(), load_yaml("hardware.yaml"),
+        collect(Path(folder) / "collected", load_sim_config(), load_hardware(),
                 CollectionSettings(strides=10 if quick else 40, seed=1))
         started = time.perf_counter()
         recording = load_bag(Path(folder) / "collected")

@@ -57,7 +57,7 @@ SIGTERM_RUNS = 3
 
 
 def _hardware():
-    from hopper_ros.canbus.driver import load_hardware
+    from hopper_ros.hardware.config import load_hardware
     return load_hardware()
 
 
@@ -76,7 +76,7 @@ def _watchdog(quick):
     from hopper_ros.config import load_yaml
 
     hardware = _hardware()
-    node_id = hardware["drive"]["node_id"]
+    node_id = hardware.drive.node_id
     repeat = float(load_yaml("control.yaml")["stride"]["keep_alive"])
     timeout = float(load_yaml("motor_driver.yaml")["motor_driver"]["command_timeout"])
     losses = QUICK_LOSSES if quick else LOSSES
@@ -208,7 +208,7 @@ def _hub(quick):
     attack_s = QUICK_ATTACK_S if quick else ATTACK_S
     script = REPO / "test" / "data" / "socketcand_load_client.py"
     figures = []
-    with SocketcandServer("127.0.0.1", 0, HARDWARE["can"]["channel"]) as hub, DriveLoop(hub.local_bus()):
+    with SocketcandServer("127.0.0.1", 0, HARDWARE.can.channel) as hub, DriveLoop(hub.local_bus()):
         load = subprocess.Popen([sys.executable, str(script), str(hub.port), str(EDS), str(NODE)],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                                 bufsize=1, env=child_env(), cwd=REPO)
@@ -364,7 +364,7 @@ def _udp_fuzz(quick):
     accepted samples whose conversion differs from the true counts (0)."""
     import random
 
-    from hopper_ros.config_schemas import load_hardware
+    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.hardware import packet as fmt
     from hopper_ros.hardware.encoders import to_register
     from hopper_ros.sensing.bridge import EncoderBridge
@@ -375,7 +375,7 @@ def _udp_fuzz(quick):
     bridge = EncoderBridge.from_config(hardware, settings)
     valid_n, fuzz_n = (QUICK_UDP_VALID, QUICK_UDP_FUZZ) if quick else (UDP_VALID, UDP_FUZZ)
     rng = random.Random(17)
-    period_us = round(float(hardware["microcontroller"]["sample_period"]) * 1e6)
+    period_us = round(float(hardware.microcontroller.sample_period) * 1e6)
     start_seq = (1 << 32) - valid_n // 2                       # the sequence wraps half way
     az0 = (1 << 31) - 40_000 * (valid_n // 2)                  # the azimuth register wraps half way
 

@@ -78,12 +78,12 @@ REALTIME_PRIORITY = 50   # SCHED_FIFO of every process of the main run, as in la
 
 
 def _packets(duration, seed=3):
-    from hopper_ros.config import load_yaml
+    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.harness.sensing_evaluation import record_experiments
     from hopper_ros.sim.config import load_sim_config
     from hopper_ros.sim.robot import SimRobot
 
-    hardware = load_yaml("hardware.yaml")
+    hardware = load_hardware()
     return hardware, record_experiments(SimRobot(load_sim_config(), hardware), duration, seed=seed).packets
 
 

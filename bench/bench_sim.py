@@ -23,7 +23,7 @@ from _common import child_env, percentile  # noqa: E402 - bench/ is on sys.path 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from hopper_ros.config import load_yaml  # noqa: E402
+from hopper_ros.hardware.config import load_hardware  # noqa: E402
 from hopper_ros.hardware import packet as packet_format  # noqa: E402
 from hopper_ros.physics.evaluation import sample_thesis_strides  # noqa: E402
 from hopper_ros.physics.exact import simulate_stride  # noqa: E402
@@ -52,7 +52,7 @@ def node_realtime_factor(duration: float, mode: str = "lockstep") -> float:
 
 
 def period_costs(duration: float) -> list[float]:
-    hardware = load_yaml("hardware.yaml")
+    hardware = load_hardware()
     config = load_sim_config().with_effects(**{name: True for name in EFFECTS})
     robot = SimRobot(config, hardware)
     series = ExperimentSeries(robot, seed=3)
@@ -72,7 +72,7 @@ def period_costs(duration: float) -> list[float]:
 
 
 def exact_agreement(count: int) -> float:
-    hardware = load_yaml("hardware.yaml")
+    hardware = load_hardware()
     config = load_sim_config().all_effects_off()
     params = config.model_params()
     worst = 0.0

@@ -22,7 +22,7 @@ sys.path.insert(0, str(REPO))
 
 from diagnosis_suite import diagnose_and_score, summarise  # noqa: E402
 
-from hopper_ros.config import load_yaml  # noqa: E402
+from hopper_ros.hardware.config import load_hardware  # noqa: E402
 from hopper_ros.recording.recordings import load_csv  # noqa: E402
 from hopper_ros.physics import effects as library  # noqa: E402
 from hopper_ros.harness.collect import CollectionSettings, collect  # noqa: E402
@@ -68,7 +68,7 @@ def make_recording(names: list[str], folder: Path, seed: int):
     physics = [n for n in names if library.get(n).kind == "physics"]
     if physics:
         cfg = cfg.with_effects(**{n: True for n in physics})
-    c = collect(folder / "bag", cfg, load_yaml("hardware.yaml"), CollectionSettings(strides=STRIDES, seed=seed),
+    c = collect(folder / "bag", cfg, load_hardware(), CollectionSettings(strides=STRIDES, seed=seed),
                 csv_path=folder / "run.csv")
     rec = load_csv(c.csv)
     truth = {"effects": []}

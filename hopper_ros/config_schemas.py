@@ -3,7 +3,7 @@ units, unknown keys refused). No ROS import.
 
 | file | schema | read by |
 |---|---|---|
-| hardware.yaml (and variants) | HARDWARE | sim_robot, motor_driver, encoder_bridge, state_estimator, collect, report |
+| hardware.yaml (and variants) | HARDWARE (built into `HardwareConfig` by hopper_ros.hardware.config.load_hardware) | sim_robot, motor_driver, encoder_bridge, state_estimator, collect, report |
 | sim.yaml | SIM (`sim.physics`: the eight model parameters; `sim.effects` is checked by hopper_ros.sim.config against the effect library) | sim_robot, collect, report |
 | sensing.yaml | SENSING | encoder_bridge, state_estimator, event_detector |
 | model.yaml (and identified models) | MODEL (`model:`; an identified model's `effects:` is checked by hopper_ros.physics.params.load_model against the effect library) | deadbeat_controller, stride_predictor, event_detector, diagnose |
@@ -386,13 +386,6 @@ SCHEDULE = Section({
 
 
 # ------------------------------------------------------------------------------------ loaders
-
-
-def load_hardware(name="hardware.yaml") -> dict:
-    """config/hardware.yaml (or a variant), validated."""
-    from hopper_ros.schema import load_config
-
-    return load_config(name, HARDWARE)
 
 
 def load_model(name="model.yaml"):

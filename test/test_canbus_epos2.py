@@ -25,10 +25,10 @@ from hopper_ros.canbus import epos2_objects as eo
 from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 from hopper_ros.canbus.epos2_objects import Command, NmtState, OperationMode, SdoAbort, State
 from hopper_ros.canbus.epos2_regulator import PositionGains, PositionRegulator
-from hopper_ros.config import load_yaml
+from hopper_ros.hardware.config import HardwareConfig, load_hardware
 
-HARDWARE = load_yaml("hardware.yaml")
-NODE = int(HARDWARE["drive"]["node_id"])
+HARDWARE = load_hardware()
+NODE = int(HARDWARE.drive.node_id)
 EDS = Path(__file__).resolve().parent / "data" / "epos2.eds"
 TIMEOUT = 5.0                 # [s] bound on every wait of these tests
 MASTER_NODE = 0x7F            # the heartbeat producer the drive consumes in the tests
@@ -44,12 +44,12 @@ def unique_channel() -> str:
 class MotorModel:
     """Rotor plus reflected leg inertia on the motor shaft, torque = k_t * current."""
 
-    def __init__(self, hardware: dict):
-        m, enc = hardware["motor"], hardware["encoders"]["motor"]
-        self.inertia = m["leg_inertia"] / m["gear_ratio"] ** 2 + m["rotor_inertia"]   # [kg m^2]
-        self.kt = m["torque_constant"]
-        self.friction = m["viscous_friction"]
-        self.counts_per_rad = enc["lines"] * enc["quadrature"] / (2.0 * math.pi)
+    def __init__(self, hardware: HardwareConfig):
+        m, enc = hardware.motor, hardware.encoders.motor
+        self.inertia = m.leg_inertia / m.gear_ratio ** 2 + m.rotor_inertia   # [kg m^2]
+        self.kt = m.torque_constant
+        self.friction = m.viscous_friction
+        self.counts_per_rad = enc.lines * enc.quadrature / (2.0 * math.pi)
         self.angle = 0.0   # [rad] motor shaft
         self.rate = 0.0    # [rad/s]
         self.current = 0.0
@@ -74,7 +74,7 @@ class MotorModel:
 class DriveLoop:
     """An Epos2Emulator and a MotorModel in a background thread, about 1 kHz of wall time."""
 
-    def __init__(self, bus: can.BusABC, hardware: dict = HARDWARE):
+    def __init__(self, bus: can.BusABC, hardware: HardwareConfig = HARDWARE):
         self.lock = threading.Lock()
         self.motor = MotorModel(hardware)
         self.t0 = time.monotonic()
@@ -160,7 +160,7 @@ def wait_statusword(node, state: State, timeout: float = TIMEOUT) -> int:
 class DirectRig:
     """The emulator on a virtual bus with a raw python-can peer and a simulated clock."""
 
-    def __init__(self, hardware: dict = HARDWARE):
+    def __init__(self, hardware: HardwareConfig = HARDWARE):
         channel = unique_channel()
         self.peer = can.Bus(interface="virtual", channel=channel)
         self.bus = can.Bus(interface="virtual", channel=channel)
@@ -259,9 +259,9 @@ def test_nmt_sdo_and_heartbeat_with_canopen_master(rig):
     assert node.sdo[0x1000].raw == 0x00020192                       # device type (CiA 402 drive)
     assert node.sdo[0x1008].raw == "EPOS2"                          # segmented upload (5 bytes)
     assert node.sdo[0x1018][1].raw == eo.MAXON_VENDOR_ID
-    assert node.sdo[0x6410][2].raw == round(HARDWARE["drive"]["current_limit"] * 1000)
+    assert node.sdo[0x6410][2].raw == round(HARDWARE.drive.current_limit * 1000)
     assert [node.sdo[0x60FB][s].raw for s in (1, 2, 3)] == [537, 2179, 705]
-    assert node.sdo[0x1017].raw == round(HARDWARE["drive"]["heartbeat_period"] * 1000)
+    assert node.sdo[0x1017].raw == round(HARDWARE.drive.heartbeat_period * 1000)
     node.nmt.state = "OPERATIONAL"
     assert node.nmt.wait_for_heartbeat(TIMEOUT) == "OPERATIONAL"
     node.nmt.state = "STOPPED"
@@ -276,7 +276,7 @@ def test_nmt_sdo_and_heartbeat_with_canopen_master(rig):
     node.nmt.state = "RESET"                                         # reset node: boot-up, defaults
     assert node.nmt.wait_for_heartbeat(TIMEOUT) == "PRE-OPERATIONAL"
     assert seen[0] == b"\x00"                                         # the boot-up message first
-    assert node.sdo[0x1017].raw == round(HARDWARE["drive"]["heartbeat_period"] * 1000)
+    assert node.sdo[0x1017].raw == round(HARDWARE.drive.heartbeat_period * 1000)
 
 
 def test_state_machine_through_controlword_sdo(rig):
@@ -346,7 +346,7 @@ def test_current_setpoint_by_remapped_pdo_moves_the_motor(rig):
 
     rpdo["Current mode setting value"].raw = 30000                       # above the 20 A limit
     rpdo.transmit()
-    assert loop.wait_for(lambda d: d.demand == pytest.approx(HARDWARE["drive"]["current_limit"]))
+    assert loop.wait_for(lambda d: d.demand == pytest.approx(HARDWARE.drive.current_limit))
     rpdo["Current mode setting value"].raw = -setpoint_ma
     rpdo.transmit()
     assert loop.wait_for(lambda d: d.demand == pytest.approx(-setpoint_ma / 1000))
@@ -582,7 +582,7 @@ def leg_step(regulator: PositionRegulator, step_deg: float, load_torque_leg: flo
              duration: float = 0.5) -> list[float]:
     """Leg angle [deg] each 1 ms of a position step, leg plus reflected rotor inertia."""
     motor = MotorModel(HARDWARE)
-    n = HARDWARE["motor"]["gear_ratio"]
+    n = HARDWARE.motor.gear_ratio
     setpoint = round(math.radians(step_deg) * n * motor.counts_per_rad)
     regulator.reset(motor.counts)
     angles = []
@@ -594,8 +594,8 @@ def leg_step(regulator: PositionRegulator, step_deg: float, load_torque_leg: flo
 
 
 def test_position_regulator_step_is_fast_and_well_damped():
-    m = HARDWARE["motor"]
-    inertia_leg = m["leg_inertia"] + m["rotor_inertia"] * m["gear_ratio"] ** 2
+    m = HARDWARE.motor
+    inertia_leg = m.leg_inertia + m.rotor_inertia * m.gear_ratio ** 2
     assert inertia_leg == pytest.approx(7.7e-3, rel=0.02)
     angles = leg_step(PositionRegulator.from_hardware(HARDWARE), 10.0)
     overshoot = (max(angles) - 10.0) / 10.0
@@ -613,15 +613,15 @@ def test_position_regulator_integral_removes_a_constant_load():
     angles = leg_step(PositionRegulator.from_hardware(HARDWARE), 0.0, load_torque_leg=load, duration=1.0)
     assert min(angles) < -0.05                                              # the load pushes it away
     assert abs(angles[-1]) < 0.005                                          # and the integral brings it back
-    proportional_only = PositionRegulator(PositionGains(537, 0, 705), HARDWARE["drive"]["current_limit"])
+    proportional_only = PositionRegulator(PositionGains(537, 0, 705), HARDWARE.drive.current_limit)
     offset = leg_step(proportional_only, 0.0, load_torque_leg=load, duration=1.0)
     assert abs(offset[-1]) > 10 * abs(angles[-1])
 
 
 def test_position_regulator_limits_and_si_gains():
     reg = PositionRegulator.from_hardware(HARDWARE)
-    assert reg.update(100000, 0) == pytest.approx(HARDWARE["drive"]["current_limit"])
-    assert reg.update(-100000, 0) == pytest.approx(-HARDWARE["drive"]["current_limit"])
+    assert reg.update(100000, 0) == pytest.approx(HARDWARE.drive.current_limit)
+    assert reg.update(-100000, 0) == pytest.approx(-HARDWARE.drive.current_limit)
     kp, ki, kd = PositionGains(537, 2179, 705).si()
     assert (kp, ki, kd) == pytest.approx((537 / 4 * 1e-3, 2179 / 1.024 * 1e-3, 705e-6))
     reg.reset(0)

@@ -171,7 +171,7 @@ def test_garbage_and_disconnects_are_survived(hub):
 
 
 def test_canopen_master_in_another_process_drives_the_emulated_epos2():
-    with SocketcandServer(host="127.0.0.1", port=0, channel=HARDWARE["can"]["channel"]) as hub:
+    with SocketcandServer(host="127.0.0.1", port=0, channel=HARDWARE.can.channel) as hub:
         with DriveLoop(hub.local_bus()) as loop:
             child = subprocess.Popen(
                 [sys.executable, str(DATA / "socketcand_canopen_master.py"), str(hub.port), str(EDS), str(NODE)],

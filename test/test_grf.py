@@ -24,12 +24,12 @@ def test_the_smoother_recovers_the_acceleration_of_quantised_positions():
 
 
 def test_virtual_footfalls_sit_on_the_toe_without_torque_and_behind_it_with_torque(tmp_path):
-    from hopper_ros.config import load_yaml
+    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.identification.settings import load_settings
     from hopper_ros.sim.config import SENSORS, load_sim_config
 
     config = load_sim_config().with_sensors(**{name: True for name in SENSORS})
-    forces = simulate_profiles(tmp_path, config, load_yaml("hardware.yaml"), load_settings().grf, config.model_params())
+    forces = simulate_profiles(tmp_path, config, load_hardware(), load_settings().grf, config.model_params())
     assert list(forces) == list(PROFILES)
     for profile, f in forces.items():
         assert f.plate is not None and len(f.t) > 40

@@ -22,14 +22,14 @@ TRUTH = ModelParams()            # config/sim.yaml's robot with its three model 
 @pytest.fixture(scope="module")
 def noisy_collection(tmp_path_factory):
     """60 strides of the simulated robot, every sensor noise on, as a bag and an unlabelled CSV."""
-    from hopper_ros.config import load_yaml
+    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.harness.collect import CollectionSettings, collect
     from hopper_ros.sim.config import SENSORS, load_sim_config
 
     folder = tmp_path_factory.mktemp("noisy_collection")
     config = load_sim_config().with_sensors(**{name: True for name in SENSORS})
     assert config.model_params() == TRUTH
-    collection = collect(folder / "bag", config, load_yaml("hardware.yaml"),
+    collection = collect(folder / "bag", config, load_hardware(),
                          CollectionSettings(strides=DATASET_STRIDES, seed=0), csv_path=folder / "strides.csv")
     assert len(collection.kept) == DATASET_STRIDES
     return collection, folder / "bag", folder / "strides.csv"

@@ -31,15 +31,15 @@ from hopper_ros.canbus.driver import (
     DriverSettings,
     MotorDriver,
     Phase,
-    load_hardware,
     load_section,
     open_bus,
 )
+from hopper_ros.hardware.config import CanBus, load_hardware
 from test_motor_driver_master import canopen_dictionary
 
 HW = load_hardware()
-NODE = HW["drive"]["node_id"]
-K_T, GEAR = HW["motor"]["torque_constant"], HW["motor"]["gear_ratio"]
+NODE = HW.drive.node_id
+K_T, GEAR = HW.motor.torque_constant, HW.motor.gear_ratio
 COUNTS_PER_LEG_TURN = 500 * 4 * 26
 SETTINGS = DriverSettings()             # the defaults: 1 ms SYNC, 10 ms command timeout
 _channels = itertools.count()
@@ -533,8 +533,8 @@ def test_configuration_and_bus_choice():
     with pytest.raises(ValueError, match="master_node_id"):
         MotorDriver(None, HW, DriverSettings(master_node_id=NODE))
     with pytest.raises(ValueError, match="udp_multicast"):
-        open_bus({"interface": "udp_multicast", "channel": "239.74.163.2"})
-    bus = open_bus(HW["can"], interface="virtual", channel="motor_driver_config_test")
+        open_bus(CanBus("udp_multicast", "239.74.163.2"))
+    bus = open_bus(HW.can, interface="virtual", channel="motor_driver_config_test")
     try:
         assert isinstance(bus, can.interfaces.virtual.VirtualBus)
     finally:

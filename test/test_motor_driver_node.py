@@ -16,11 +16,11 @@ from hopper_ros.canbus import epos2_objects as eo
 from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 from hopper_ros.canbus.epos2_objects import Command, NmtState, State
 from hopper_ros.canbus.socketcand_server import SocketcandServer
-from hopper_ros.canbus.driver import load_hardware
+from hopper_ros.hardware.config import load_hardware
 
 HW = load_hardware()
-K_T, GEAR = HW["motor"]["torque_constant"], HW["motor"]["gear_ratio"]
-RPDO_COB_IDS = {eo.rpdo_cob_id(n, int(HW["drive"]["node_id"])) for n in (1, 2)}
+K_T, GEAR = HW.motor.torque_constant, HW.motor.gear_ratio
+RPDO_COB_IDS = {eo.rpdo_cob_id(n, int(HW.drive.node_id)) for n in (1, 2)}
 
 
 class DriveThread:

@@ -218,7 +218,7 @@ def test_nothing_recorded_is_ever_overwritten(tmp_path):
     with pytest.raises(BagError, match="not a bag"):
         bag_info(tmp_path / "run")
     # nor a CSV export
-    from hopper_ros.config import load_yaml
+    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.recording.recordings import RecordingError, load_csv, write_csv
     from hopper_ros.harness.collect import CollectionSettings, collect
     from hopper_ros.sim.config import load_sim_config
@@ -228,7 +228,7 @@ def test_nothing_recorded_is_ever_overwritten(tmp_path):
     with pytest.raises(RecordingError, match="never written over"):
         write_csv(table, load_csv(table))
     with pytest.raises(ValueError, match="never written over"):
-        collect(tmp_path / "new_bag", load_sim_config(), load_yaml("hardware.yaml"), CollectionSettings(experiments=1),
+        collect(tmp_path / "new_bag", load_sim_config(), load_hardware(), CollectionSettings(experiments=1),
                 csv_path=table)
     assert not (tmp_path / "new_bag").exists() and len(load_csv(table)) == 2
 
@@ -236,13 +236,13 @@ def test_nothing_recorded_is_ever_overwritten(tmp_path):
 def test_lockstep_collection_records_what_a_live_recording_holds(tmp_path):
     from rosbags.rosbag2 import Reader
 
-    from hopper_ros.config import load_yaml
+    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.recording.recordings import load_bag, load_csv
     from hopper_ros.harness.collect import CollectionSettings, collect
     from hopper_ros.sim.config import load_sim_config
 
     config = load_sim_config().with_sensors(encoder_noise=True)
-    hardware = load_yaml("hardware.yaml")
+    hardware = load_hardware()
     result = collect(tmp_path / "bag", config, hardware, CollectionSettings(experiments=12, seed=4),
                      csv_path=tmp_path / "strides.csv")
     kept = len(result.kept)

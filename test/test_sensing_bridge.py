@@ -9,13 +9,14 @@ import zlib
 import pytest
 
 from hopper_ros.config import load_yaml
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.hardware.encoders import BoomKinematics, to_register
 from hopper_ros.hardware.packet import EncoderPacket
 from hopper_ros.sensing.bridge import COUNTER_NAMES, EncoderBridge
 from hopper_ros.sensing.config import SensingConfig, load_sensing_config
 
-HARDWARE = load_yaml("hardware.yaml")
+HARDWARE = load_hardware()
 CONFIG = load_sensing_config()
 KINEMATICS = BoomKinematics.from_config(HARDWARE)
 PERIOD_US = 1000
@@ -113,9 +114,7 @@ def test_counters_and_sequence_wrap_around_without_a_jump():
     """Registers crossing 2^31 -> -2^31 and the sequence crossing 2^32 -> 0, homing offsets applied."""
     start_elevation = KINEMATICS.counts(0.0, 0.35, 0.0)[1]
     offsets = (2 ** 31 - 40, -2 ** 31 - start_elevation + 8, 2 ** 31 - 5)   # homing: counter values at angle zero
-    hardware = load_yaml("hardware.yaml")
-    for name, offset in zip(("azimuth", "elevation", "motor"), offsets):
-        hardware["encoders"][name]["offset_counts"] = offset
+    hardware = load_hardware().with_offsets(**dict(zip(("azimuth", "elevation", "motor"), offsets)))
     b = bridge(hardware)
     start = 2 ** 32 - 3
     samples = []

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from hopper_ros.config import load_yaml
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.hardware.encoders import BoomKinematics
 from hopper_ros.physics.params import load_params
@@ -21,7 +21,7 @@ from hopper_ros.sensing.samples import Measurement
 from hopper_ros.sim.config import load_sim_config
 from hopper_ros.sim.robot import SimRobot
 
-HARDWARE = load_yaml("hardware.yaml")
+HARDWARE = load_hardware()
 CONFIG = load_sensing_config()
 KINEMATICS = BoomKinematics.from_config(HARDWARE)
 PERIOD = 1e-3

@@ -14,7 +14,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from hopper_ros.config import load_yaml
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.config import load_sensing_config
@@ -26,7 +26,7 @@ from hopper_ros.sensing.samples import Estimate, EventType
 from hopper_ros.sim.config import load_sim_config
 from hopper_ros.sim.robot import SimRobot
 
-HARDWARE = load_yaml("hardware.yaml")
+HARDWARE = load_hardware()
 CONFIG = load_sensing_config()
 PARAMS = load_params()
 TOLERANCE = 2e-3   # [s] the bound on every event time

@@ -17,6 +17,7 @@ import yaml
 
 from conftest import SAFETY_TIMEOUT, free_port, spin_until
 from hopper_ros.config import load_yaml
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware.encoders import BoomKinematics, to_register
 from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.config import load_sensing_config
@@ -27,7 +28,7 @@ from hopper_ros.sim.config import load_sim_config
 from hopper_ros.sim.plant import PlantEvent
 from hopper_ros.sim.robot import SimRobot
 
-HARDWARE = load_yaml("hardware.yaml")
+HARDWARE = load_hardware()
 PARAMS = load_params()
 PRE_TOUCHDOWN = load_sensing_config().detector.pre_touchdown_height
 KINDS = {EventType.APEX: "apex", EventType.TOUCHDOWN: "touchdown", EventType.BOTTOM: "bottom",

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from hopper_ros.config import load_yaml
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.hardware.encoders import BoomKinematics, CounterUnwrapper
 from hopper_ros.physics import effects as library
@@ -18,7 +19,7 @@ from hopper_ros.sim.config import EFFECTS, SimConfig, load_sim_config
 from hopper_ros.sim.experiment import StrideExperiment, drive_hold
 from hopper_ros.sim.robot import SimRobot
 
-HARDWARE = load_yaml("hardware.yaml")
+HARDWARE = load_hardware()
 BASE = load_sim_config()
 # the extended TD-SLIP model's own terms, each taken out of the physics
 WITHOUT_MODEL_TERMS = {"flight_damping": {"flight_damping_horizontal": 0.0, "flight_damping_vertical": 0.0},
@@ -58,8 +59,8 @@ def test_lockstep_matches_the_exact_return_map(which):
     if which == "slip":
         config = config.with_physics(**{k: v for terms in WITHOUT_MODEL_TERMS.values() for k, v in terms.items()})
     params = config.model_params()
-    counts = HARDWARE["encoders"]["motor"]
-    count = 2.0 * math.pi / (counts["lines"] * counts["quadrature"] * counts["transmission"])
+    counts = HARDWARE.encoders.motor
+    count = 2.0 * math.pi / (counts.lines * counts.quadrature * counts.transmission)
     compared = 0
     for apex_height, forward_speed, touchdown_angle, tau_0, ramp in thesis_strides(params, 12, seed=4):
         experiment, _ = run_stride(config, apex_height, forward_speed, touchdown_angle, tau_0, ramp)
@@ -211,10 +212,7 @@ def test_force_plate_impulse_equals_momentum_change():
 
 
 def test_packets_decode_to_the_true_positions_across_counter_wrap():
-    hardware = dict(HARDWARE)
-    encoders = {name: dict(section) for name, section in HARDWARE["encoders"].items()}
-    encoders["azimuth"]["offset_counts"] = 2 ** 31 - 3000   # the register wraps within the stride
-    hardware["encoders"] = encoders
+    hardware = HARDWARE.with_offsets(azimuth=2 ** 31 - 3000)   # the register wraps within the stride
     config = BASE.all_effects_off()
     experiment, samples = run_stride(config, 0.38, 2.0, 0.3, 5.0, 0.11, hardware=hardware)
     kinematics = BoomKinematics.from_config(hardware)

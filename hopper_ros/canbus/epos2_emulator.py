@@ -34,6 +34,7 @@ from hopper_ros.canbus.epos2_objects import (
     State,
 )
 from hopper_ros.canbus.epos2_regulator import POSITION_LOOP_PERIOD, PositionGains, PositionRegulator
+from hopper_ros.hardware.config import HardwareConfig
 
 log = logging.getLogger(__name__)
 
@@ -81,10 +82,9 @@ class _Counters:
 class Epos2Emulator:
     """The emulated EPOS2. See the module docstring for the calling contract."""
 
-    def __init__(self, bus: can.BusABC, hardware: dict, *, node_id: int | None = None):
-        drive = hardware["drive"]
+    def __init__(self, bus: can.BusABC, hardware: HardwareConfig, *, node_id: int | None = None):
         self.bus = bus
-        self.node_id = int(drive["node_id"] if node_id is None else node_id)
+        self.node_id = int(hardware.drive.node_id if node_id is None else node_id)
         self._hardware = hardware
         self._table = od.object_dictionary(self.node_id)
         self._indices = {index for index, _ in self._table}
@@ -99,17 +99,16 @@ class Epos2Emulator:
 
     def _config_defaults(self) -> dict[tuple[int, int], int]:
         """Values taken from config/hardware.yaml instead of the factory defaults."""
-        drive = self._hardware["drive"]
-        encoder = self._hardware["encoders"]["motor"]
-        gains = drive["position_gains"]
+        drive = self._hardware.drive
+        gains = drive.position_gains
         return {
-            (od.MOTOR_DATA, od.MOTOR_CONTINUOUS_CURRENT_LIMIT_SUB): round(drive["continuous_current"] / _MILLI),
-            (od.MOTOR_DATA, od.MOTOR_OUTPUT_CURRENT_LIMIT_SUB): round(drive["current_limit"] / _MILLI),
-            (od.POSITION_CONTROL_PARAMETERS, od.GAIN_P_SUB): int(gains["p"]),
-            (od.POSITION_CONTROL_PARAMETERS, od.GAIN_I_SUB): int(gains["i"]),
-            (od.POSITION_CONTROL_PARAMETERS, od.GAIN_D_SUB): int(gains["d"]),
-            (od.PRODUCER_HEARTBEAT_TIME, 0): round(drive["heartbeat_period"] / _MS),
-            (od.SENSOR_CONFIGURATION, od.SENSOR_PULSE_NUMBER_SUB): int(encoder["lines"]),
+            (od.MOTOR_DATA, od.MOTOR_CONTINUOUS_CURRENT_LIMIT_SUB): round(drive.continuous_current / _MILLI),
+            (od.MOTOR_DATA, od.MOTOR_OUTPUT_CURRENT_LIMIT_SUB): round(drive.current_limit / _MILLI),
+            (od.POSITION_CONTROL_PARAMETERS, od.GAIN_P_SUB): gains.p,
+            (od.POSITION_CONTROL_PARAMETERS, od.GAIN_I_SUB): gains.i,
+            (od.POSITION_CONTROL_PARAMETERS, od.GAIN_D_SUB): gains.d,
+            (od.PRODUCER_HEARTBEAT_TIME, 0): round(drive.heartbeat_period / _MS),
+            (od.SENSOR_CONFIGURATION, od.SENSOR_PULSE_NUMBER_SUB): self._hardware.encoders.motor.lines,
         }
 
     def _reset_communication(self) -> None:

@@ -23,6 +23,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from hopper_ros.hardware.config import HardwareConfig
+
 #: EPOS2 position loop period [s] (the regulator's sample time)
 POSITION_LOOP_PERIOD = 1.0e-3
 #: Our interpretation of the 0x60FB gain scaling (see the module docstring)
@@ -59,15 +61,13 @@ class PositionRegulator:
         self.reset()
 
     @classmethod
-    def from_hardware(cls, hardware: dict) -> "PositionRegulator":
-        """Build from the parsed config/hardware.yaml (drive.position_gains, drive.current_limit,
+    def from_hardware(cls, hardware: HardwareConfig) -> "PositionRegulator":
+        """Build from config/hardware.yaml (drive.position_gains, drive.current_limit,
         encoders.motor for the leg-angle conversion of `current()`)."""
-        drive = hardware["drive"]
-        g = drive["position_gains"]
-        enc = hardware["encoders"]["motor"]
-        cpr = float(enc["lines"]) * float(enc["quadrature"]) * float(enc["transmission"]) / (2.0 * math.pi)
-        return cls(PositionGains(int(g["p"]), int(g["i"]), int(g["d"])), float(drive["current_limit"]),
-                   counts_per_radian=cpr * int(enc["direction"]))
+        drive, enc = hardware.drive, hardware.encoders.motor
+        g = drive.position_gains
+        cpr = float(enc.lines) * float(enc.quadrature) * enc.transmission / (2.0 * math.pi)
+        return cls(PositionGains(g.p, g.i, g.d), drive.current_limit, counts_per_radian=cpr * enc.direction)
 
     def reset(self, position_qc: int | None = None) -> None:
         """Forget the integral and the previous position (on enable, mode change, fault)."""

@@ -59,7 +59,7 @@ def _switches(on: str, off: str) -> dict:
 
 
 def main(args: argparse.Namespace) -> int:
-    from hopper_ros.config_schemas import load_hardware
+    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.schema import ConfigError
     from hopper_ros.identification.progress import ProgressBar
     from hopper_ros.recording.bag import BagError

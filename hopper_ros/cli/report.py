@@ -38,7 +38,7 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from hopper_ros.config_schemas import load_hardware
+    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.harness.grf import simulate_profiles
     from hopper_ros.identification.pipeline import identify
     from hopper_ros.recording.recordings import RecordingError

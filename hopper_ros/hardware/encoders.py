@@ -20,7 +20,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from hopper_ros.hardware.config import HardwareConfig
 
 COUNTER_MODULUS = 1 << 32
 _HALF = 1 << 31
@@ -83,19 +86,6 @@ class Encoder:
         """One count in radians of the measured axis."""
         return 2.0 * math.pi / self.counts_per_turn
 
-    @classmethod
-    def from_config(cls, name: str, section: Mapping[str, Any]) -> "Encoder":
-        try:
-            encoder = cls(name, int(section["lines"]), int(section["quadrature"]), float(section["transmission"]),
-                          int(section["direction"]), int(section["offset_counts"]))
-        except KeyError as exc:
-            raise ValueError(f"hardware config: encoders.{name} lacks {exc.args[0]!r}") from None
-        if encoder.direction not in (-1, 1):
-            raise ValueError(f"hardware config: encoders.{name}.direction must be 1 or -1, got {encoder.direction}")
-        if encoder.lines <= 0 or encoder.quadrature <= 0 or encoder.transmission <= 0:
-            raise ValueError(f"hardware config: encoders.{name}: lines, quadrature and transmission must be positive")
-        return encoder
-
 
 @dataclass(frozen=True)
 class BoomPosition:
@@ -121,16 +111,10 @@ class BoomKinematics:
     motor: Encoder
 
     @classmethod
-    def from_config(cls, hardware: Mapping[str, Any]) -> "BoomKinematics":
-        try:
-            boom, encoders = hardware["boom"], hardware["encoders"]
-            return cls(float(boom["length"]), float(boom["parallel_height"]), float(boom["leg_offset"]),
-                       float(boom["ground_height"]),
-                       Encoder.from_config("azimuth", encoders["azimuth"]),
-                       Encoder.from_config("elevation", encoders["elevation"]),
-                       Encoder.from_config("motor", encoders["motor"]))
-        except KeyError as exc:
-            raise ValueError(f"hardware config lacks {exc.args[0]!r} (boom: or encoders:)") from None
+    def from_config(cls, hardware: "HardwareConfig") -> "BoomKinematics":
+        boom, encoders = hardware.boom, hardware.encoders
+        return cls(boom.length, boom.parallel_height, boom.leg_offset, boom.ground_height,
+                   encoders.azimuth, encoders.elevation, encoders.motor)
 
     @property
     def forward_radius(self) -> float:

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from hopper_ros.hardware.config import HardwareConfig
 
 RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 
@@ -25,17 +28,10 @@ class HipMotor:
     viscous_friction: float     # [N m s/rad] at the motor shaft
 
     @classmethod
-    def from_config(cls, hardware: Mapping[str, Any]) -> "HipMotor":
-        try:
-            motor, drive = hardware["motor"], hardware["drive"]
-            result = cls(float(motor["gear_ratio"]), float(motor["torque_constant"]), int(motor["direction"]),
-                         float(drive["current_limit"]), float(motor["rotor_inertia"]), float(motor["leg_inertia"]),
-                         float(motor["viscous_friction"]))
-        except KeyError as exc:
-            raise ValueError(f"hardware config lacks {exc.args[0]!r} (motor: or drive:)") from None
-        if result.gear_ratio <= 0 or result.torque_constant <= 0 or result.current_limit <= 0:
-            raise ValueError("hardware config: gear_ratio, torque_constant and current_limit must be positive")
-        return result
+    def from_config(cls, hardware: "HardwareConfig") -> "HipMotor":
+        motor = hardware.motor
+        return cls(motor.gear_ratio, motor.torque_constant, motor.direction, hardware.drive.current_limit,
+                   motor.rotor_inertia, motor.leg_inertia, motor.viscous_friction)
 
     @property
     def torque_per_amp(self) -> float:

@@ -28,6 +28,7 @@ from typing import Callable, Iterable
 import numpy as np
 import yaml
 
+from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.hardware.encoders import BoomKinematics, CounterUnwrapper
 from hopper_ros.hardware.motor import HipMotor
 from hopper_ros.physics.aas import predict_aas
@@ -104,7 +105,7 @@ class Collection:
 class PacketConverter:
     """Encoder packets -> BodyMeasurement fields through the kinematics of appendix A."""
 
-    def __init__(self, hardware) -> None:
+    def __init__(self, hardware: HardwareConfig) -> None:
         self.kinematics = BoomKinematics.from_config(hardware)
         self.motor = HipMotor.from_config(hardware)
         self.unwrap = (CounterUnwrapper(), CounterUnwrapper(), CounterUnwrapper())
@@ -141,7 +142,7 @@ def _failure(experiment) -> str:
     return ""
 
 
-def collect(output: str | os.PathLike, sim_config: SimConfig, hardware, settings: CollectionSettings, *,
+def collect(output: str | os.PathLike, sim_config: SimConfig, hardware: HardwareConfig, settings: CollectionSettings, *,
             csv_path: str | os.PathLike | None = None, csv_phase: bool = False,
             draws: Iterable[tuple[float, float, float, float, float]] | None = None,
             progress: Callable[[int, int], None] | None = None, origin_ns: int | None = None) -> Collection:

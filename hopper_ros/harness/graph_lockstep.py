@@ -13,12 +13,13 @@ to check the loop end to end (signs, units, timing) and by the benchmarks.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping
+from typing import Iterable
 
 import can
 
 from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 from hopper_ros.hardware import packet as packet_format
+from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.canbus.driver import DriverSettings, MotorDriver
 from hopper_ros.sensing.pipeline import SensingPipeline
 from hopper_ros.sensing.samples import EventType
@@ -41,7 +42,7 @@ class GraphRun:
 class GraphLockstep:
     """Simulated robot + sensing + controller + motor driver, stepped together."""
 
-    def __init__(self, sim_config, hardware: Mapping[str, Any], controller: DeadbeatController,
+    def __init__(self, sim_config, hardware: HardwareConfig, controller: DeadbeatController,
                  driver_settings: DriverSettings | None = None, stride_settings: StrideSettings | None = None) -> None:
         channel = f"graph_lockstep_{next(_CHANNELS)}"
         self._drive_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.identification.grf import PROFILE_TITLES, PROFILES, StanceForces, stance_forces
 from hopper_ros.identification.strides import extract_strides
 from hopper_ros.physics.aas import predict_aas
@@ -15,7 +16,7 @@ from hopper_ros.recording.recordings import load_bag
 from .collect import CollectionSettings, collect
 
 
-def simulate_profiles(folder, sim_config, hardware, grf_settings, params) -> dict[str, StanceForces]:
+def simulate_profiles(folder, sim_config, hardware: HardwareConfig, grf_settings, params) -> dict[str, StanceForces]:
     """One single-stride experiment per torque profile on the simulated robot, recorded as a bag
     in `folder/<profile>` (body_measurement and force_plate), then its stance GRF both ways."""
     g = grf_settings

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Iterable, Mapping
+from typing import Iterable
 
+from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.sim.experiment import StrideExperiment, drive_hold
 from hopper_ros.sim.robot import SimRobot
 
@@ -33,7 +34,7 @@ class StrideRecord:
     refine_time: float       # [s] stage 2 (the refinement during the flight)
 
 
-def run_closed_loop(controller: DeadbeatController, sim_config, hardware: Mapping[str, Any],
+def run_closed_loop(controller: DeadbeatController, sim_config, hardware: HardwareConfig,
                     setpoints: Iterable[tuple[float, float]], start: tuple[float, float] | None = None) -> list[StrideRecord]:
     """One stride per setpoint (height [m], speed [m/s]); stops early if the robot falls."""
     setpoints = list(setpoints)

@@ -31,7 +31,7 @@ import time
 
 from rclpy.node import Node
 
-from hopper_ros.config_schemas import load_hardware
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.msg import BodyMeasurement, EncoderSample
 from hopper_ros.nodes.common import run_node, sensing_parameters
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
@@ -50,9 +50,9 @@ class EncoderBridgeNode(Node):
         param, config, period = sensing_parameters(self)
         hardware = load_hardware(param("hardware_file", "", "hardware (YAML), '' = the sensing file's") or
                              config.hardware_file)
-        microcontroller = hardware["microcontroller"]
-        host = param("host", "", "address to listen on ('' = hardware.yaml)") or str(microcontroller["host"])
-        port = param("port", 0, "UDP port ('' = hardware.yaml)") or int(microcontroller["port"])
+        microcontroller = hardware.microcontroller
+        host = param("host", "", "address to listen on ('' = hardware.yaml)") or microcontroller.host
+        port = param("port", 0, "UDP port ('' = hardware.yaml)") or microcontroller.port
         self.bridge = EncoderBridge.from_config(hardware, config.bridge)
 
         self._socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

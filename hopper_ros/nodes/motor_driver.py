@@ -28,10 +28,11 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from hopper_ros.canbus.epos2_objects import State
-from hopper_ros.canbus.driver import (COUNTER_NAMES, ERROR, INFO, WARN, DriverSettings, MotorDriver, load_hardware,
-                                     load_section, select_transport)
+from hopper_ros.canbus.driver import (COUNTER_NAMES, ERROR, INFO, WARN, DriverSettings, MotorDriver, load_section,
+                                     select_transport)
 from hopper_ros.canbus.driver.bus import open_transport
 from hopper_ros.canbus.driver.cycle import CycleLoop
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.msg import MotorCommand, MotorStatus
 from hopper_ros.nodes import diagnostics
 from hopper_ros.nodes.common import read_only_parameters, run_node, stop_requested
@@ -84,7 +85,7 @@ class MotorDriverNode(Node):
         # while a callback runs (the default switch interval is 5 ms).
         sys.setswitchinterval(min(sys.getswitchinterval(), settings.sync_period / 4))
         self._lock = threading.Lock()
-        transport = select_transport(hardware.get("can", {}), **bus_overrides)
+        transport = select_transport(hardware.can, **bus_overrides)
         self._bus = open_transport(transport, cancelled=stop_requested)
         try:
             self._driver = MotorDriver(self._bus, hardware, settings)

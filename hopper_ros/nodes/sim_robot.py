@@ -37,7 +37,7 @@ import dataclasses
 
 from rclpy.node import Node
 
-from hopper_ros.config_schemas import load_hardware
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.msg import ApexState, BodyState, GaitEvent, GroundReactionForce
 from hopper_ros.nodes.common import read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import OK, WARN, DiagnosticsReporter
@@ -59,9 +59,9 @@ class SimRobotNode(Node):
         hardware = load_hardware(param("hardware_file", "hardware.yaml", "hardware configuration (YAML)"))
         mode = param("mode", "realtime", "realtime or lockstep")
         can_setting = param("can", "hub", "hub, virtual:CHANNEL or none")
-        can_port = param("can_port", int(hardware["can"]["port"]), "TCP port of the CAN hub on 127.0.0.1")
-        udp_host = param("udp_host", str(hardware["microcontroller"]["host"]), "where the encoder packets go")
-        udp_port = param("udp_port", int(hardware["microcontroller"]["port"]), "UDP port of the encoder packets")
+        can_port = param("can_port", int(hardware.can.port), "TCP port of the CAN hub on 127.0.0.1")
+        udp_host = param("udp_host", hardware.microcontroller.host, "where the encoder packets go")
+        udp_port = param("udp_port", hardware.microcontroller.port, "UDP port of the encoder packets")
         enable = param("enable_effects", [""], "effects to switch on")
         disable = param("disable_effects", [""], "effects to switch off")
         switches = {name: True for name in enable if name} | {name: False for name in disable if name}

@@ -26,7 +26,7 @@ import time
 
 from rclpy.node import Node
 
-from hopper_ros.config_schemas import load_hardware
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.msg import BodyMeasurement, BodyState
 from hopper_ros.nodes.common import run_node, sensing_parameters
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter

@@ -29,6 +29,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from hopper_ros.hardware import packet as packet_format
+from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.hardware.encoders import BoomKinematics, BoomPosition, CounterUnwrapper, to_register
 from hopper_ros.hardware.motor import HipMotor
 from hopper_ros.hardware.packet import EncoderPacket, PacketError
@@ -89,12 +90,9 @@ class EncoderBridge:
         self._encoders = (kinematics.azimuth, kinematics.elevation, kinematics.motor)
 
     @classmethod
-    def from_config(cls, hardware, settings: BridgeSettings) -> "EncoderBridge":
-        try:
-            period = float(hardware["microcontroller"]["sample_period"])
-        except KeyError as exc:
-            raise ValueError(f"hardware config lacks {exc.args[0]!r} (microcontroller:)") from None
-        return cls(BoomKinematics.from_config(hardware), HipMotor.from_config(hardware), period, settings)
+    def from_config(cls, hardware: HardwareConfig, settings: BridgeSettings) -> "EncoderBridge":
+        return cls(BoomKinematics.from_config(hardware), HipMotor.from_config(hardware),
+                   hardware.microcontroller.sample_period, settings)
 
     # ------------------------------------------------------------------ one datagram
     def process(self, datagram: bytes, receive_time: float) -> BridgeSample | None:

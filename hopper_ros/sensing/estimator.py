@@ -47,6 +47,7 @@ import math
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
+from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.hardware.encoders import BoomKinematics
 
 from .config import EstimatorSettings
@@ -175,8 +176,8 @@ class StateEstimator:
         self.last_mahalanobis = np.zeros(3)
 
     @classmethod
-    def from_config(cls, settings: EstimatorSettings, hardware) -> "StateEstimator":
-        return cls(settings, BoomKinematics.from_config(hardware), float(hardware["microcontroller"]["sample_period"]))
+    def from_config(cls, settings: EstimatorSettings, hardware: HardwareConfig) -> "StateEstimator":
+        return cls(settings, BoomKinematics.from_config(hardware), hardware.microcontroller.sample_period)
 
     # ------------------------------------------------------------------ model
     def model(self, dt: float) -> tuple[np.ndarray, np.ndarray]:

@@ -7,8 +7,8 @@ of recorded packet streams.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Mapping
 
+from hopper_ros.hardware.config import HardwareConfig, load_hardware
 from hopper_ros.physics.params import ModelParams
 
 from .bridge import BridgeSample, EncoderBridge
@@ -26,15 +26,15 @@ class PipelineOutput:
 
 
 class SensingPipeline:
-    def __init__(self, config: SensingConfig, hardware: Mapping[str, Any], params: ModelParams) -> None:
+    def __init__(self, config: SensingConfig, hardware: HardwareConfig, params: ModelParams) -> None:
         self.bridge = EncoderBridge.from_config(hardware, config.bridge)
         self.estimator = StateEstimator.from_config(config.estimator, hardware)
         self.detector = EventDetector(params, config.detector)
 
     @classmethod
-    def from_files(cls, sensing_file: str = "sensing.yaml", hardware: Mapping[str, Any] | None = None,
+    def from_files(cls, sensing_file: str = "sensing.yaml", hardware: HardwareConfig | None = None,
                    model_file: str | None = None) -> "SensingPipeline":
-        from hopper_ros.config_schemas import load_hardware, load_model
+        from hopper_ros.config_schemas import load_model
 
         config = load_sensing_config(sensing_file)
         return cls(config, hardware if hardware is not None else load_hardware(config.hardware_file),

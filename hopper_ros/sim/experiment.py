@@ -13,6 +13,7 @@ from __future__ import annotations
 from enum import Enum
 
 from hopper_ros.canbus.epos2_regulator import PositionRegulator
+from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.physics import laws
 from hopper_ros.physics.evaluation import sample_thesis_strides
 
@@ -107,7 +108,7 @@ class StrideExperiment:
 
 
 
-def drive_hold(hardware) -> "PositionRegulator":
+def drive_hold(hardware: HardwareConfig) -> PositionRegulator:
     """The drive's position regulator (Position Mode PID of section 4.1) for the experiment."""
     return PositionRegulator.from_hardware(hardware)
 

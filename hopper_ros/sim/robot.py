@@ -20,10 +20,11 @@ from __future__ import annotations
 import random
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Callable
 
 from hopper_ros.canbus.epos2_objects import OperationMode
 from hopper_ros.canbus.epos2_regulator import POSITION_LOOP_PERIOD
+from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.hardware.encoders import BoomKinematics, to_register
 from hopper_ros.hardware.motor import HipMotor
 from hopper_ros.hardware.packet import EncoderPacket
@@ -96,7 +97,7 @@ class CommandHistory:
 class SimRobot:
     """The robot: `throw` it to an apex, then `step` once per period."""
 
-    def __init__(self, config: SimConfig, hardware: Mapping[str, Any], *, drive=None) -> None:
+    def __init__(self, config: SimConfig, hardware: HardwareConfig, *, drive=None) -> None:
         self.config = config
         self.hardware = hardware
         self.kinematics = BoomKinematics.from_config(hardware)

@@ -11,10 +11,11 @@ import dataclasses
 import socket
 import threading
 import time
-from typing import Any, Callable, Mapping
+from typing import Callable
 
 from hopper_ros.canbus.driver.bus import open_drive_side, sim_transport
 from hopper_ros.hardware import packet as packet_format
+from hopper_ros.hardware.config import HardwareConfig
 
 from .experiment import ExperimentSeries
 from .robot import SimRobot, SimSample
@@ -23,10 +24,10 @@ MODES = ("realtime", "lockstep")
 RESYNC_LATENESS = 0.05     # [s] further behind than this, real-time mode stops catching up
 
 
-def open_drive(can_setting: str, hardware: Mapping[str, Any], port: int | None):
+def open_drive(can_setting: str, hardware: HardwareConfig, port: int | None):
     """The emulated EPOS2 on the transport `can_setting` names (`hub`, `virtual:CHANNEL`, `none`);
     returns (drive, closer, hub or None), (None, None, None) for none."""
-    transport = sim_transport(can_setting, hardware["can"], port)
+    transport = sim_transport(can_setting, hardware.can, port)
     if transport is None:
         return None, None, None
     from hopper_ros.canbus.epos2_emulator import Epos2Emulator
@@ -39,7 +40,7 @@ class SimRunner:
     """SimRobot with its drive, packet stream and pacing. `on_sample(sample)` is called from the
     stepping thread every period; `on_done()` once `duration` of simulated time has run."""
 
-    def __init__(self, config, hardware: Mapping[str, Any], *, mode: str = "realtime", can: str = "hub",
+    def __init__(self, config, hardware: HardwareConfig, *, mode: str = "realtime", can: str = "hub",
                  can_port: int | None = None, udp_host: str = "127.0.0.1", udp_port: int | None = None,
                  duration: float = 0.0, experiments: bool = False, throw_lead: float = 0.05,
                  on_sample: Callable[[SimSample], None] = lambda sample: None, on_done: Callable[[], None] = lambda: None):
@@ -56,7 +57,7 @@ class SimRunner:
         self.series = ExperimentSeries(self.robot, seed=config.seed) if experiments else None
         self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._udp.bind(("127.0.0.1", 0))            # a sender on loopback only, not on 0.0.0.0
-        port = udp_port if udp_port is not None else hardware["microcontroller"]["port"]
+        port = udp_port if udp_port is not None else hardware.microcontroller.port
         self.udp_address = ("127.0.0.1", int(port))
         self.counters = {"periods": 0, "deadline_misses": 0, "udp_errors": 0, "falls": 0, "strides": 0,
                          "throws": 0}          # falls, strides: counted by the caller, from the samples' events

@@ -13,9 +13,8 @@ The node hopper_ros/nodes/motor_driver.py adapts it to ROS. Description: docs/mo
 from .bus import Transport, open_bus, open_drive_side, select_transport, sim_transport
 from .driver import DriveStatus, MotorDriver, Phase
 from .settings import (COUNTER_NAMES, ERROR, INFO, MODE_CURRENT, MODE_DISABLED, MODE_NAMES, MODE_POSITION, MODE_RAMP,
-                       NODE_KEYS, WARN, DriveConfig, DriverSettings, load_hardware, load_section)
+                       NODE_KEYS, WARN, DriveConfig, DriverSettings, load_section)
 
 __all__ = ["Transport", "open_bus", "open_drive_side", "select_transport", "sim_transport", "DriveStatus",
            "MotorDriver", "Phase", "COUNTER_NAMES", "ERROR", "INFO", "MODE_CURRENT", "MODE_DISABLED", "MODE_NAMES",
-           "MODE_POSITION", "MODE_RAMP", "NODE_KEYS", "WARN", "DriveConfig", "DriverSettings", "load_hardware",
-           "load_section"]
+           "MODE_POSITION", "MODE_RAMP", "NODE_KEYS", "WARN", "DriveConfig", "DriverSettings", "load_section"]

@@ -15,9 +15,11 @@ import logging
 import socket
 import time
 from dataclasses import dataclass, replace
-from typing import Any, Callable, Mapping
+from typing import Any, Callable
 
 import can
+
+from hopper_ros.hardware.config import CanBus
 
 CONNECT_TIMEOUT = 30.0   # [s] for a socketcand server to accept (the simulated robot may start later)
 DEFAULT_BITRATE = 1000000
@@ -46,9 +48,9 @@ class Transport:
         return config
 
 
-def select_transport(can_config: Mapping[str, Any], **overrides: Any) -> Transport:
+def select_transport(can_config: CanBus, **overrides: Any) -> Transport:
     """The transport of a `can:` section (hardware.yaml); values in `overrides` win unless empty."""
-    cfg = dict(can_config)
+    cfg = can_config.given()
     cfg.update({k: v for k, v in overrides.items() if v not in (None, "", 0)})
     interface = str(cfg.get("interface") or "")
     if interface == "udp_multicast":
@@ -61,7 +63,7 @@ def select_transport(can_config: Mapping[str, Any], **overrides: Any) -> Transpo
                      float(cfg.get("connect_timeout") or CONNECT_TIMEOUT))
 
 
-def sim_transport(setting: str, can_config: Mapping[str, Any], port: int | None = None) -> Transport | None:
+def sim_transport(setting: str, can_config: CanBus, port: int | None = None) -> Transport | None:
     """The transport the simulated robot's `can` parameter names: `hub` (the socketcand hub of
     hardware.yaml, on `port`), `virtual:CHANNEL` (python-can's in-process bus), `none` (None)."""
     if setting == "none":
@@ -98,7 +100,7 @@ def open_transport(transport: Transport, cancelled: Callable[[], bool] = lambda:
     return can.Bus(**config)
 
 
-def open_bus(can_config: Mapping[str, Any], cancelled: Callable[[], bool] = lambda: False, **overrides: Any) -> can.BusABC:
+def open_bus(can_config: CanBus, cancelled: Callable[[], bool] = lambda: False, **overrides: Any) -> can.BusABC:
     """A python-can bus from the `can:` section of hardware.yaml (values in `overrides` win)."""
     return open_transport(select_transport(can_config, **overrides), cancelled)
 

@@ -32,7 +32,7 @@ import struct
 import time
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any, Callable, Mapping
+from typing import Callable
 
 import can
 
@@ -50,6 +50,7 @@ from hopper_ros.canbus.master import (
     nmt_state_name,
     sync_frame,
 )
+from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.physics.laws import ramp_torque
 
 from . import cia402, startup
@@ -97,7 +98,7 @@ class DriveStatus:
 class MotorDriver:
     """CANopen master of one EPOS2 (see the module docstring). Not thread-safe: one caller at a time."""
 
-    def __init__(self, bus: can.BusABC, hardware: Mapping[str, Any] | DriveConfig,
+    def __init__(self, bus: can.BusABC, hardware: HardwareConfig | DriveConfig,
                  settings: DriverSettings = DriverSettings(), clock: Callable[[], float] = time.monotonic):
         self.bus = bus
         self.settings = settings

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any, Mapping
 
+from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.hardware.encoders import Encoder
 from hopper_ros.hardware.motor import HipMotor
 
@@ -73,13 +74,6 @@ def load_section(name: str = "motor_driver.yaml") -> dict[str, Any]:
     return dict(load_config(name, MOTOR_DRIVER)["motor_driver"])
 
 
-def load_hardware(name: str = "hardware.yaml") -> Mapping[str, Any]:
-    """config/hardware.yaml (or a variant), validated by its schema (hopper_ros.config_schemas)."""
-    from hopper_ros.config_schemas import load_hardware as load
-
-    return load(name)
-
-
 @dataclass(frozen=True)
 class DriveConfig:
     """The drive as hardware.yaml describes it (sections `drive`, `motor`, `encoders.motor`)."""
@@ -96,17 +90,9 @@ class DriveConfig:
         return self.motor.current_limit
 
     @classmethod
-    def from_hardware(cls, hardware: Mapping[str, Any]) -> "DriveConfig":
-        motor = HipMotor.from_config(hardware)
-        try:
-            drive = hardware["drive"]
-            encoder = Encoder.from_config("motor", hardware["encoders"]["motor"])
-            gains = drive["position_gains"]
-            config = cls(int(drive["node_id"]), float(drive["continuous_current"]),
-                         (int(gains["p"]), int(gains["i"]), int(gains["d"])), float(drive["heartbeat_period"]),
-                         motor, encoder)
-        except KeyError as exc:
-            raise ValueError(f"hardware config lacks {exc.args[0]!r} (drive: / encoders.motor:)") from None
-        if not 0 < config.continuous_current <= config.current_limit:
-            raise ValueError("hardware config: drive.continuous_current must be in (0, current_limit]")
-        return config
+    def from_hardware(cls, hardware: HardwareConfig) -> "DriveConfig":
+        """The drive's part of config/hardware.yaml (checked there: continuous_current <= current_limit)."""
+        drive = hardware.drive
+        gains = drive.position_gains
+        return cls(drive.node_id, drive.continuous_current, (gains.p, gains.i, gains.d), drive.heartbeat_period,
+                   HipMotor.from_config(hardware), hardware.encoders.motor)
