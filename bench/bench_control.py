@@ -17,6 +17,7 @@ again with it off.
 - strides_to_settle: the most strides any setpoint step needed to come within 1 cm and 0.05 m/s
   (and stay there).
 """
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -25,9 +26,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from hopper_ros.config import load_yaml  # noqa: E402
+from hopper_ros.control.config import load_control  # noqa: E402
+from hopper_ros.control.deadbeat import DeadbeatController  # noqa: E402
 from hopper_ros.hardware.config import load_hardware  # noqa: E402
-from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings  # noqa: E402
 from hopper_ros.harness.lockstep import run_closed_loop, summarise  # noqa: E402
 from hopper_ros.physics.params import load_params  # noqa: E402
 from hopper_ros.sim.config import load_sim_config  # noqa: E402
@@ -37,10 +38,10 @@ def run(quick=False):
     per_segment, repeats = (12, 1) if quick else (20, 3)
     schedule = ([(0.39, 2.0)] * per_segment + [(0.42, 2.0)] * per_segment + [(0.38, 2.5)] * per_segment) * repeats
     hardware = load_hardware()
-    base = load_yaml("control.yaml")["deadbeat"]
+    base = load_control().deadbeat
     figures = []
     for adaptation in (True, False):
-        settings = DeadbeatSettings.from_mapping({**base, "adaptation": adaptation})
+        settings = dataclasses.replace(base, adaptation=adaptation)
         records = run_closed_loop(DeadbeatController(load_params(), settings), load_sim_config(), hardware, schedule)
         if len(records) < len(schedule):
             raise RuntimeError(f"the robot fell after {len(records)} strides (adaptation {adaptation})")

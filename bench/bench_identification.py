@@ -19,12 +19,12 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from hopper_ros.hardware.config import load_hardware  # noqa: E402
+from hopper_ros.harness.collect import CollectionSettings, collect  # noqa: E402
 from hopper_ros.identification.crossval import cross_validate  # noqa: E402
 from hopper_ros.identification.fit import fit_parameters  # noqa: E402
-from hopper_ros.recording.recordings import load_bag  # noqa: E402
 from hopper_ros.identification.settings import load_settings  # noqa: E402
 from hopper_ros.identification.strides import extract_strides  # noqa: E402
-from hopper_ros.harness.collect import CollectionSettings, collect  # noqa: E402
+from hopper_ros.recording.recordings import load_bag  # noqa: E402
 from hopper_ros.sim.config import SENSORS, load_sim_config  # noqa: E402
 
 

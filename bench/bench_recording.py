@@ -28,10 +28,10 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from hopper_ros.hardware.config import load_hardware  # noqa: E402
-from hopper_ros.recording.recordings import load_bag  # noqa: E402
+from hopper_ros.harness.collect import CollectionSettings, collect  # noqa: E402
 from hopper_ros.msg import BodyMeasurement  # noqa: E402
 from hopper_ros.recording.bag import BagReader, BagWriter  # noqa: E402
-from hopper_ros.harness.collect import CollectionSettings, collect  # noqa: E402
+from hopper_ros.recording.recordings import load_bag  # noqa: E402
 from hopper_ros.sim.config import load_sim_config  # noqa: E402
 
 

@@ -70,15 +70,16 @@ def _free_port():
 # ---------------------------------------------------------------------------- watchdog
 
 def _watchdog(quick):
+    from hopper_ros.canbus.driver import load_motor_driver
     from hopper_ros.canbus.epos2_emulator import Epos2Emulator
     from hopper_ros.canbus.epos2_objects import Command, State, decode_statusword, rpdo_cob_id, tpdo_cob_id
     from hopper_ros.canbus.socketcand_server import SocketcandServer
-    from hopper_ros.config import load_yaml
+    from hopper_ros.control.config import load_control
 
     hardware = _hardware()
     node_id = hardware.drive.node_id
-    repeat = float(load_yaml("control.yaml")["stride"]["keep_alive"])
-    timeout = float(load_yaml("motor_driver.yaml")["motor_driver"]["command_timeout"])
+    repeat = load_control().stride.keep_alive
+    timeout = load_motor_driver().driver.command_timeout
     losses = QUICK_LOSSES if quick else LOSSES
     namespace = f"/hopper_bench_watchdog_{os.getpid()}"
     rpdo1, tpdo1 = rpdo_cob_id(1, node_id), tpdo_cob_id(1, node_id)
@@ -364,8 +365,8 @@ def _udp_fuzz(quick):
     accepted samples whose conversion differs from the true counts (0)."""
     import random
 
-    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.hardware import packet as fmt
+    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.hardware.encoders import to_register
     from hopper_ros.sensing.bridge import EncoderBridge
     from hopper_ros.sensing.config import load_sensing_config
@@ -529,8 +530,8 @@ def _can_fuzz(quick):
     import can
 
     from hopper_ros.canbus import epos2_objects as eo
-    from hopper_ros.canbus.epos2_objects import Command, State
     from hopper_ros.canbus.driver import MODE_CURRENT
+    from hopper_ros.canbus.epos2_objects import Command, State
     from test_motor_driver import NODE, Rig
 
     frames_per_seed = QUICK_CAN_FRAMES_PER_SEED if quick else CAN_FRAMES_PER_SEED

@@ -23,8 +23,8 @@ from _common import child_env, percentile  # noqa: E402 - bench/ is on sys.path 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from hopper_ros.hardware.config import load_hardware  # noqa: E402
 from hopper_ros.hardware import packet as packet_format  # noqa: E402
+from hopper_ros.hardware.config import load_hardware  # noqa: E402
 from hopper_ros.physics.evaluation import sample_thesis_strides  # noqa: E402
 from hopper_ros.physics.exact import simulate_stride  # noqa: E402
 from hopper_ros.sim.config import EFFECTS, load_sim_config  # noqa: E402

@@ -23,9 +23,9 @@ sys.path.insert(0, str(REPO))
 from diagnosis_suite import diagnose_and_score, summarise  # noqa: E402
 
 from hopper_ros.hardware.config import load_hardware  # noqa: E402
-from hopper_ros.recording.recordings import load_csv  # noqa: E402
-from hopper_ros.physics import effects as library  # noqa: E402
 from hopper_ros.harness.collect import CollectionSettings, collect  # noqa: E402
+from hopper_ros.physics import effects as library  # noqa: E402
+from hopper_ros.recording.recordings import load_csv  # noqa: E402
 from hopper_ros.sim.config import SENSORS, load_sim_config  # noqa: E402
 
 SENSOR_FAULTS = {"z_delay": 0.004, "y_delay": 0.004, "theta_delay": 0.004, "z_scale": 1.03, "y_scale": 1.03,

@@ -10,17 +10,17 @@ import math
 
 import pytest
 
-from hopper_ros.config import load_yaml
-from hopper_ros.hardware.config import load_hardware
+from hopper_ros.control.config import load_control
 from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings
-from hopper_ros.harness.lockstep import run_closed_loop, summarise
 from hopper_ros.control.stride_machine import MODE_CURRENT, MODE_DISABLED, MODE_POSITION, Phase, StrideMachine, StridePlan
+from hopper_ros.hardware.config import load_hardware
+from hopper_ros.harness.lockstep import run_closed_loop, summarise
 from hopper_ros.physics.params import load_params
 from hopper_ros.physics.predictors import predict_stride
 from hopper_ros.sim.config import load_sim_config
 
 HARDWARE = load_hardware()
-SETTINGS = DeadbeatSettings.from_mapping(load_yaml("control.yaml")["deadbeat"], "control.yaml")
+SETTINGS = load_control().deadbeat
 FIG_5_5 = [(0.39, 2.0)] * 20 + [(0.42, 2.0)] * 20 + [(0.38, 2.5)] * 20
 
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from hopper_ros.identification.cost import stride_errors
-from hopper_ros.recording.recordings import Recording, RecordingError, load_bag, load_csv, write_csv
 from hopper_ros.identification.settings import FITTABLE, load_settings
 from hopper_ros.identification.strides import extract_strides
 from hopper_ros.physics.params import ModelParams
+from hopper_ros.recording.recordings import Recording, RecordingError, load_bag, load_csv, write_csv
 
 DATASET_STRIDES = 60
 TRUTH = ModelParams()            # config/sim.yaml's robot with its three model effects on = Table 4.1

@@ -9,6 +9,7 @@ what it decoded can be tied to the step it happened in.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import threading
@@ -31,7 +32,7 @@ from hopper_ros.canbus.driver import (
     DriverSettings,
     MotorDriver,
     Phase,
-    load_section,
+    load_motor_driver,
     open_bus,
 )
 from hopper_ros.hardware.config import CanBus, load_hardware
@@ -522,10 +523,11 @@ def test_blocking_shutdown_pumps_the_bus_itself():
 
 
 def test_configuration_and_bus_choice():
-    section = load_section()
-    settings = DriverSettings.from_mapping(section)
+    config = load_motor_driver()
+    settings = config.driver
     assert settings.command_timeout == 0.01 and settings.sync_period == 0.001
-    assert DriverSettings.from_mapping(section, command_timeout=0.005).command_timeout == 0.005
+    assert (config.hardware_file, config.status_period, config.status_decimation) == ("hardware.yaml", 0.1, 1)
+    assert dataclasses.replace(settings, command_timeout=0.005).command_timeout == 0.005
     with pytest.raises(ValueError, match="comand_timeout: unknown key"):
         DriverSettings.from_mapping({"comand_timeout": 0.02})
     with pytest.raises(ValueError, match="command_timeout"):

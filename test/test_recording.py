@@ -219,8 +219,8 @@ def test_nothing_recorded_is_ever_overwritten(tmp_path):
         bag_info(tmp_path / "run")
     # nor a CSV export
     from hopper_ros.hardware.config import load_hardware
-    from hopper_ros.recording.recordings import RecordingError, load_csv, write_csv
     from hopper_ros.harness.collect import CollectionSettings, collect
+    from hopper_ros.recording.recordings import RecordingError, load_csv, write_csv
     from hopper_ros.sim.config import load_sim_config
 
     table = tmp_path / "strides.csv"
@@ -237,8 +237,8 @@ def test_lockstep_collection_records_what_a_live_recording_holds(tmp_path):
     from rosbags.rosbag2 import Reader
 
     from hopper_ros.hardware.config import load_hardware
-    from hopper_ros.recording.recordings import load_bag, load_csv
     from hopper_ros.harness.collect import CollectionSettings, collect
+    from hopper_ros.recording.recordings import load_bag, load_csv
     from hopper_ros.sim.config import load_sim_config
 
     config = load_sim_config().with_sensors(encoder_noise=True)

@@ -9,8 +9,8 @@ import zlib
 import pytest
 
 from hopper_ros.config import load_yaml
-from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware import packet as packet_format
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware.encoders import BoomKinematics, to_register
 from hopper_ros.hardware.packet import EncoderPacket
 from hopper_ros.sensing.bridge import COUNTER_NAMES, EncoderBridge

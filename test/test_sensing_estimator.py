@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware import packet as packet_format
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware.encoders import BoomKinematics
+from hopper_ros.harness.sensing_evaluation import flight_velocity_errors, record_experiments, replay
 from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.sensing.estimator import StateEstimator, constant_acceleration
-from hopper_ros.harness.sensing_evaluation import flight_velocity_errors, record_experiments, replay
 from hopper_ros.sensing.pipeline import SensingPipeline
 from hopper_ros.sensing.samples import Measurement
 from hopper_ros.sim.config import load_sim_config

@@ -14,8 +14,8 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware import packet as packet_format
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.config import load_sensing_config
 from hopper_ros.harness.sensing_evaluation import (MCU_CLOCK_OFFSET, detected_in_sim_time, inject_faults, match_events,

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from hopper_ros.config import load_yaml
-from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware import packet as packet_format
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware.encoders import BoomKinematics, CounterUnwrapper
 from hopper_ros.physics import effects as library
 from hopper_ros.physics import lanes, laws

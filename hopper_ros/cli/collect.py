@@ -60,10 +60,10 @@ def _switches(on: str, off: str) -> dict:
 
 def main(args: argparse.Namespace) -> int:
     from hopper_ros.hardware.config import load_hardware
-    from hopper_ros.schema import ConfigError
+    from hopper_ros.harness.collect import CollectionSettings, collect
     from hopper_ros.identification.progress import ProgressBar
     from hopper_ros.recording.bag import BagError
-    from hopper_ros.harness.collect import CollectionSettings, collect
+    from hopper_ros.schema import ConfigError
     from hopper_ros.sim.config import SENSORS, load_sim_config
 
     try:

@@ -39,14 +39,14 @@ def main(args: argparse.Namespace) -> int:
 
 def _main(args: argparse.Namespace) -> int:
     from hopper_ros.hardware.config import load_hardware
+    from hopper_ros.harness.collect import CollectionSettings, collect
     from hopper_ros.harness.grf import simulate_profiles
     from hopper_ros.identification.pipeline import identify
-    from hopper_ros.recording.recordings import RecordingError
     from hopper_ros.identification.settings import load_settings
     from hopper_ros.recording.bag import BagError
-    from hopper_ros.schema import ConfigError
-    from hopper_ros.harness.collect import CollectionSettings, collect
+    from hopper_ros.recording.recordings import RecordingError
     from hopper_ros.reports.identification import write_report
+    from hopper_ros.schema import ConfigError
     from hopper_ros.sim.config import SENSORS, load_sim_config
 
     out = Path(args.output)

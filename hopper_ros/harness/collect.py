@@ -151,9 +151,9 @@ def collect(output: str | os.PathLike, sim_config: SimConfig, hardware: Hardware
     `draws` (apex height, forward speed, theta_td, tau_0, t_f) replaces the thesis-range draws.
     """
 
-    from hopper_ros.recording.recordings import Recording, write_csv
-    from hopper_ros.nodes.stamps import stamp_of_ns
     from hopper_ros.msg import BodyMeasurement, BodyState, GaitEvent, GroundReactionForce, StrideCommand
+    from hopper_ros.nodes.stamps import stamp_of_ns
+    from hopper_ros.recording.recordings import Recording, write_csv
 
     if csv_path is not None and Path(csv_path).exists():
         raise ValueError(f"{csv_path} exists already; a recording is never written over")

@@ -17,10 +17,10 @@ from typing import Iterable
 
 import can
 
+from hopper_ros.canbus.driver import DriverSettings, MotorDriver
 from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.hardware.config import HardwareConfig
-from hopper_ros.canbus.driver import DriverSettings, MotorDriver
 from hopper_ros.sensing.pipeline import SensingPipeline
 from hopper_ros.sensing.samples import EventType
 from hopper_ros.sim.robot import SimRobot

@@ -34,23 +34,23 @@ within 20 ms).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from hopper_ros.config import config_path
-from hopper_ros.config_schemas import CONTROL, load_model
-from hopper_ros.control.deadbeat import DeadbeatController, DeadbeatSettings, StrideDecision
+from hopper_ros.config_schemas import load_model
+from hopper_ros.control.config import load_control
+from hopper_ros.control.deadbeat import DeadbeatController, StrideDecision
 from hopper_ros.control.stride_machine import Phase
-from hopper_ros.control.stride_policy import StridePolicy, StrideSettings
+from hopper_ros.control.stride_policy import StridePolicy
 from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
 from hopper_ros.nodes.common import read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import (DIAGNOSTICS_TOPIC, ERROR, OK, WARN, DiagnosticsReporter, level_of,
                                           split_node_name)
 from hopper_ros.nodes.stamps import to_seconds, to_stamp
-from hopper_ros.schema import load_config
 
 SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -67,23 +67,22 @@ class DeadbeatControllerNode(Node):
         tau_0 = param("tau_0", math.nan, "single stride: initial torque [N m]")
         touchdown_angle = param("touchdown_angle", math.nan, "single stride: touchdown angle [rad]")
         adaptation = param("adaptation", "", "override control.yaml: true or false")
-        config = load_config(config_file, CONTROL)
-        settings = dict(config.get("deadbeat", {}))
-        stride = config.get("stride", {})
-        keep_alive = param("keep_alive", float(stride.get("keep_alive", 0.003)),
+        config = load_control(config_file)
+        keep_alive = param("keep_alive", config.stride.keep_alive,
                            "[s] an unchanged motor command is repeated this often (control.yaml stride.keep_alive)")
+        settings = config.deadbeat
         if adaptation:
             if adaptation not in ("true", "false"):
                 raise ValueError(f"adaptation must be true or false, got {adaptation!r}")
-            settings["adaptation"] = adaptation == "true"
+            settings = dataclasses.replace(settings, adaptation=adaptation == "true")
         self.params = load_model(model_file)
-        self.controller = DeadbeatController(self.params, DeadbeatSettings.from_mapping(settings, str(config_path(config_file))))
+        self.controller = DeadbeatController(self.params, settings)
         if self.experiment == "single_stride":
             if not (math.isfinite(tau_0) and math.isfinite(touchdown_angle)):
                 raise ValueError("experiment:=single_stride needs the parameters tau_0 and touchdown_angle")
         elif self.experiment != "closed_loop":
             raise ValueError(f"experiment must be closed_loop or single_stride, got {self.experiment!r}")
-        self.policy = StridePolicy(self.controller, StrideSettings.from_mapping(stride, keep_alive=keep_alive),
+        self.policy = StridePolicy(self.controller, dataclasses.replace(config.stride, keep_alive=keep_alive),
                                    (tau_0, touchdown_angle) if self.experiment == "single_stride" else None)
 
         self._command_pub = self.create_publisher(MotorCommand, "motor_command", COMMAND_QOS)

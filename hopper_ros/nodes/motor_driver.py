@@ -21,6 +21,7 @@ connects it to ROS.
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import threading
 
@@ -28,7 +29,7 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from hopper_ros.canbus.epos2_objects import State
-from hopper_ros.canbus.driver import (COUNTER_NAMES, ERROR, INFO, WARN, DriverSettings, MotorDriver, load_section,
+from hopper_ros.canbus.driver import (COUNTER_NAMES, ERROR, INFO, WARN, MotorDriver, load_motor_driver,
                                      select_transport)
 from hopper_ros.canbus.driver.bus import open_transport
 from hopper_ros.canbus.driver.cycle import CycleLoop
@@ -67,18 +68,17 @@ class MotorDriverNode(Node):
         super().__init__("motor_driver", **node_kwargs)
         param = read_only_parameters(self)
         config_file = param("config_file", "motor_driver.yaml", "driver settings (YAML)")
-        section = load_section(config_file)
-        hardware_file = param("hardware_file", str(section.get("hardware_file", "hardware.yaml")), "hardware (YAML)")
+        config = load_motor_driver(config_file)
+        hardware_file = param("hardware_file", config.hardware_file, "hardware (YAML)")
         bus_overrides = {name: param(name, "", f"CAN {name} ('' = hardware file)")
                          for name in ("interface", "channel", "host")}
         bus_overrides["port"] = param("port", 0, "CAN socketcand port (0 = hardware file)")
-        command_timeout = param("command_timeout", float(section.get("command_timeout", DriverSettings.command_timeout)),
+        command_timeout = param("command_timeout", config.driver.command_timeout,
                                 "[s] no command this long: quick stop, then disable")
-        sync_period = param("sync_period", float(section.get("sync_period", DriverSettings.sync_period)), "[s] SYNC period")
-        status_decimation = param("status_decimation", int(section.get("status_decimation", 1)),
+        sync_period = param("sync_period", config.driver.sync_period, "[s] SYNC period")
+        status_decimation = param("status_decimation", config.status_decimation,
                                   "motor_status on every Nth TPDO set (1: every SYNC)")
-        diagnostics_period = float(section.get("diagnostics_period", 0.5))
-        settings = DriverSettings.from_mapping(section, command_timeout=command_timeout, sync_period=sync_period)
+        settings = dataclasses.replace(config.driver, command_timeout=command_timeout, sync_period=sync_period)
         hardware = load_hardware(hardware_file)
 
         # The CAN cycle thread must get the interpreter within a fraction of the SYNC period even
@@ -98,8 +98,8 @@ class MotorDriverNode(Node):
         self._diagnostics = DiagnosticsReporter(self, f"EPOS2 node {self._driver.node_id} on CAN {transport.interface}")
         self.create_subscription(MotorCommand, "motor_command", self._on_command, COMMAND_QOS)
         self._loop = CycleLoop(self._driver, self._lock, self._log, self._publish_status, self.get_logger().error,
-                               status_decimation, float(section.get("status_period", 0.1)))
-        self.create_timer(diagnostics_period, self._publish_diagnostics)
+                               status_decimation, config.status_period)
+        self.create_timer(config.diagnostics_period, self._publish_diagnostics)
         self._loop.start()
         self.get_logger().info(
             f"motor driver on {self._bus.channel_info}: drive node {self._driver.node_id}, SYNC every "

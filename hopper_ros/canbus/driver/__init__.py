@@ -1,6 +1,7 @@
 """The hip motor driver: CANopen master of the maxon EPOS2, as plain Python (no ROS).
 
-- `settings`  DriverSettings (config/motor_driver.yaml), DriveConfig (hardware.yaml), modes, levels
+- `settings`  DriverSettings and MotorDriverConfig (config/motor_driver.yaml), DriveConfig (hardware.yaml),
+              modes, levels
 - `bus`       the transport (python-can's bus config): the driver's end and the simulated drive's
 - `cia402`    the CiA 402 device control as tables, the fault reset's edges
 - `startup`   the PDO layout, the start-up SDO sequence and the shutdown sequence
@@ -13,8 +14,10 @@ The node hopper_ros/nodes/motor_driver.py adapts it to ROS. Description: docs/mo
 from .bus import Transport, open_bus, open_drive_side, select_transport, sim_transport
 from .driver import DriveStatus, MotorDriver, Phase
 from .settings import (COUNTER_NAMES, ERROR, INFO, MODE_CURRENT, MODE_DISABLED, MODE_NAMES, MODE_POSITION, MODE_RAMP,
-                       NODE_KEYS, WARN, DriveConfig, DriverSettings, load_section)
+                       NODE_KEYS, WARN, DriveConfig, DriverSettings, MotorDriverConfig,
+                       load_motor_driver)
 
 __all__ = ["Transport", "open_bus", "open_drive_side", "select_transport", "sim_transport", "DriveStatus",
            "MotorDriver", "Phase", "COUNTER_NAMES", "ERROR", "INFO", "MODE_CURRENT", "MODE_DISABLED", "MODE_NAMES",
-           "MODE_POSITION", "MODE_RAMP", "NODE_KEYS", "WARN", "DriveConfig", "DriverSettings", "load_section"]
+           "MODE_POSITION", "MODE_RAMP", "NODE_KEYS", "WARN", "DriveConfig", "DriverSettings", "MotorDriverConfig",
+           "load_motor_driver"]

@@ -66,12 +66,25 @@ class DriverSettings:
         return cls(**{k: v for k, v in checked.items() if k in known})
 
 
-def load_section(name: str = "motor_driver.yaml") -> dict[str, Any]:
-    """The `motor_driver` section of a config file (driver settings plus the NODE_KEYS), validated."""
+@dataclass(frozen=True)
+class MotorDriverConfig:
+    """config/motor_driver.yaml: the driver's settings and the node's own keys (NODE_KEYS)."""
+
+    driver: DriverSettings
+    hardware_file: str = "hardware.yaml"
+    status_period: float = 0.1          # [s] motor_status at most this often while the drive is not enabled
+    status_decimation: int = 1          # motor_status on every Nth TPDO set
+    diagnostics_period: float = 0.5     # [s]
+
+
+def load_motor_driver(name: str = "motor_driver.yaml") -> MotorDriverConfig:
+    """The `motor_driver` section of a config file (config/ name or path), checked and typed."""
     from hopper_ros.config_schemas import MOTOR_DRIVER
     from hopper_ros.schema import load_config
 
-    return dict(load_config(name, MOTOR_DRIVER)["motor_driver"])
+    section = load_config(name, MOTOR_DRIVER)["motor_driver"]
+    node = {key: section[key] for key in NODE_KEYS if key in section}
+    return MotorDriverConfig(DriverSettings.from_mapping(section), **node)
 
 
 @dataclass(frozen=True)
