@@ -208,8 +208,8 @@ def compare_with_sim(got):
         return offsets[known[index]]
 
     first_apex = min(seconds(m.header.stamp) for m in got["sim_events"] if m.type == EventType.APEX)
-    plant_events = [PlantEvent(KINDS[EventType(m.type)], seconds(m.header.stamp), m.state.y, m.state.z,
-                               m.state.y_dot, m.state.z_dot, m.state.leg_angle)
+    plant_events = [PlantEvent(seconds(m.header.stamp), m.state.y, m.state.z, m.state.y_dot, m.state.z_dot,
+                               m.state.leg_angle, kind=KINDS[EventType(m.type)])
                     for m in got["sim_events"] if seconds(m.header.stamp) >= first_apex]
     toes = sorted((truth_stamp[m.sequence], m.z - PARAMS.rest_length * math.cos(m.leg_angle)) for m in got["truth"])
     truth = true_events(plant_events, toes, PARAMS.rest_length, PRE_TOUCHDOWN)

@@ -70,9 +70,9 @@ class SimRobotNode(Node):
         if period:
             config = dataclasses.replace(config, period=float(period))
         apex = config.initial_apex
-        apex_height = param("apex_height", apex["apex_height"], "initial apex height [m]")
-        forward_speed = param("forward_speed", apex["forward_speed"], "initial forward speed [m/s]")
-        leg_angle = param("leg_angle", apex["leg_angle"], "initial leg angle [rad]")
+        apex_height = param("apex_height", apex.apex_height, "initial apex height [m]")
+        forward_speed = param("forward_speed", apex.forward_speed, "initial forward speed [m/s]")
+        leg_angle = param("leg_angle", apex.leg_angle, "initial leg angle [rad]")
         duration = param("duration", 0.0, "simulated time to run [s], 0: until stopped")
         experiments = param("experiments", False, "run built-in single-stride experiments (can:=none)")
         hold = param("hold", False, "hold the robot at its first throw until sim/throw")

@@ -107,6 +107,15 @@ def _physics(data: Mapping[str, Any], source: str) -> dict[str, float]:
 
 
 @dataclass(frozen=True)
+class InitialApex:
+    """sim.yaml `initial_apex`: the first throw."""
+
+    apex_height: float       # [m]
+    forward_speed: float     # [m/s]
+    leg_angle: float         # [rad]
+
+
+@dataclass(frozen=True)
 class SimConfig:
     period: float
     substeps: int
@@ -115,7 +124,7 @@ class SimConfig:
     sensors: dict[str, dict]
     contact_threshold: float
     pre_touchdown_height: float
-    initial_apex: dict[str, float]
+    initial_apex: InitialApex
     seed: int
 
     @classmethod
@@ -132,7 +141,7 @@ class SimConfig:
                 sensors=_switches(_section(data, "sensors", source), SENSORS, f"{source}: sim.sensors"),
                 contact_threshold=float(_section(data, "force_plate", source)["contact_threshold"]),
                 pre_touchdown_height=float(_section(data, "experiment", source)["pre_touchdown_height"]),
-                initial_apex={k: float(v) for k, v in _section(data, "initial_apex", source).items()},
+                initial_apex=InitialApex(**{k: float(v) for k, v in _section(data, "initial_apex", source).items()}),
                 seed=int(data.get("seed", 0)),
             )
         except (KeyError, TypeError) as exc:

@@ -28,7 +28,7 @@ reproduces `physics.exact` (tested to 1e-6).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 from hopper_ros.physics import laws
@@ -46,16 +46,22 @@ Y, Z, YDOT, ZDOT, THETA, THETA_DOT, DEPTH, TORQUE, SLIP = range(9)
 
 
 @dataclass(frozen=True)
-class PlantEvent:
+class BodyMotion:
+    """The true motion at one instant: the body's position and velocity, the leg angle."""
+
+    t: float                 # [s]
+    y: float                 # [m] forward
+    z: float                 # [m] height above the running surface
+    ydot: float              # [m/s]
+    zdot: float              # [m/s]
+    leg_angle: float         # [rad]
+
+
+@dataclass(frozen=True)
+class PlantEvent(BodyMotion):
     """An event of the true motion: kind is "apex", "touchdown", "bottom", "liftoff" or "fall"."""
 
-    kind: str
-    t: float
-    y: float
-    z: float
-    ydot: float
-    zdot: float
-    leg_angle: float
+    kind: str = field(kw_only=True)
 
 
 class Plant:
@@ -318,7 +324,7 @@ class Plant:
         self.events.append(self._event("fall", self.t, s))
 
     def _event(self, kind: str, t: float, s: list) -> PlantEvent:
-        return PlantEvent(kind, t, s[Y], s[Z], s[YDOT], s[ZDOT], s[THETA])
+        return PlantEvent(t, s[Y], s[Z], s[YDOT], s[ZDOT], s[THETA], kind=kind)
 
     # ------------------------------------------------------------------ outputs
     def applied_torque(self, torque: TorqueFunction) -> float:

@@ -31,7 +31,7 @@ from hopper_ros.hardware.packet import EncoderPacket
 from hopper_ros.physics.exact import Phase
 
 from .config import SimConfig
-from .plant import Plant, PlantEvent
+from .plant import BodyMotion, Plant, PlantEvent
 
 MCU_CLOCK_START_US = 1_000_000  # the microcontroller has been up for a second when the sim starts
 
@@ -48,15 +48,9 @@ class GroundForce:
 
 
 @dataclass(frozen=True)
-class TrueState:
+class TrueState(BodyMotion):
     """Ground truth at the end of a period, for tests and for the mismatch tool's proofs."""
 
-    t: float
-    y: float
-    z: float
-    ydot: float
-    zdot: float
-    leg_angle: float
     leg_rate: float
     phase: Phase
     in_contact: bool

@@ -26,15 +26,10 @@ DEFAULT_BITRATE = 1000000
 
 
 @dataclass(frozen=True)
-class Transport:
-    """python-can's bus arguments for the drive's bus."""
+class Transport(CanBus):
+    """python-can's bus arguments for the drive's bus: a `can:` section with the overrides applied."""
 
-    interface: str
-    channel: str | None = None
-    host: str | None = None
-    port: int | None = None
-    bitrate: int | None = None
-    connect_timeout: float = CONNECT_TIMEOUT
+    connect_timeout: float = CONNECT_TIMEOUT   # [s]
 
     def bus_config(self) -> dict[str, Any]:
         """The keyword arguments of `can.Bus` (python-can's config) for this transport."""
