@@ -58,3 +58,63 @@ def serve_emulated_drive(drive, stop):
         drive.poll(now)
         drive.control(now, 0, 0.0, drive.demand)
         time.sleep(0.0005)
+
+
+class DriverOnEmulatedDrive:
+    """`with DriverOnEmulatedDrive(hardware, namespace, on_frame) as rig:` this process serves the
+    socketcand hub on loopback with an emulated EPOS2 on it (a thread) and a bus spy calling
+    `on_frame(frame)` for every frame; a child process runs the motor_driver node (`hopper run
+    motor_driver`, socketcand client, in `namespace`). On leaving, the node is stopped with
+    `stop_signal` and its stderr is `rig.node_log`."""
+
+    def __init__(self, hardware, namespace, on_frame, stop_signal=None):
+        import signal
+
+        self.hardware, self.namespace, self.on_frame = hardware, namespace, on_frame
+        self.stop_signal = signal.SIGTERM if stop_signal is None else stop_signal
+        self.node_log = ""
+
+    def __enter__(self):
+        import subprocess
+        import sys
+        import threading
+
+        from hopper_ros.canbus.epos2_emulator import Epos2Emulator
+        from hopper_ros.canbus.socketcand_server import SocketcandServer
+
+        self._stop = threading.Event()
+        self._hub = SocketcandServer("127.0.0.1", 0, "can0").start()
+        drive_bus, spy_bus = self._hub.local_bus(), self._hub.local_bus()
+        drive = Epos2Emulator(drive_bus, self.hardware)
+
+        def spy():
+            while not self._stop.is_set():
+                frame = spy_bus.recv(timeout=0.05)
+                if frame is not None:
+                    self.on_frame(frame)
+
+        self._threads = [threading.Thread(target=serve_emulated_drive, args=(drive, self._stop), daemon=True),
+                         threading.Thread(target=spy, daemon=True)]
+        for thread in self._threads:
+            thread.start()
+        self._node = subprocess.Popen(
+            [sys.executable, "-m", "hopper_ros.cli", "run", "motor_driver", "--ros-args",
+             "-r", f"__ns:={self.namespace}", "-p", "interface:=socketcand", "-p", "host:=127.0.0.1",
+             "-p", f"port:={self._hub.port}"],
+            cwd=REPO, env=child_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        return self
+
+    def __exit__(self, *exc_info):
+        import subprocess
+
+        self._node.send_signal(self.stop_signal)
+        try:
+            _, self.node_log = self._node.communicate(timeout=30.0)
+        except subprocess.TimeoutExpired:
+            self._node.kill()
+            _, self.node_log = self._node.communicate()
+        self._stop.set()
+        for thread in self._threads:
+            thread.join(5.0)
+        self._hub.close()
+        return False

@@ -19,11 +19,10 @@ import os
 import struct
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
-from _common import Paced, child_env, percentile, serve_emulated_drive  # noqa: E402 - bench/ is on sys.path (the script's folder)
+from _common import DriverOnEmulatedDrive, Paced, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -47,9 +46,7 @@ def _torque_for(sequence, hardware):
 
 
 def run(quick=False):
-    from hopper_ros.canbus.epos2_emulator import Epos2Emulator
     from hopper_ros.canbus.epos2_objects import rpdo_cob_id
-    from hopper_ros.canbus.socketcand_server import SocketcandServer
     from hopper_ros.hardware.config import load_hardware
 
     hardware = load_hardware()
@@ -59,45 +56,19 @@ def run(quick=False):
     namespace = f"/hopper_bench_motor_{os.getpid()}"
     rpdo1 = rpdo_cob_id(1, node_id)
     frames = []                                      # (realtime ns on the bus, controlword, mA) of every RPDO1
-    stop = threading.Event()
 
-    hub = SocketcandServer("127.0.0.1", 0, "can0").start()
-    drive_bus, spy_bus = hub.local_bus(), hub.local_bus()
-    drive = Epos2Emulator(drive_bus, hardware)
+    def on_frame(frame):
+        if frame.arbitration_id == rpdo1 and len(frame.data) == 5:
+            controlword, _, milliamps = struct.unpack("<Hbh", frame.data)
+            frames.append((round(frame.timestamp * 1e9), controlword, milliamps))
 
-    def spy():
-        while not stop.is_set():
-            frame = spy_bus.recv(timeout=0.05)
-            if frame is not None and frame.arbitration_id == rpdo1 and len(frame.data) == 5:
-                controlword, _, milliamps = struct.unpack("<Hbh", frame.data)
-                frames.append((round(frame.timestamp * 1e9), controlword, milliamps))
-
-    threads = [threading.Thread(target=serve_emulated_drive, args=(drive, stop), daemon=True),
-               threading.Thread(target=spy, daemon=True)]
-    for thread in threads:
-        thread.start()
-    node = subprocess.Popen(
-        [sys.executable, "-m", "hopper_ros.cli", "run", "motor_driver", "--ros-args",
-         "-r", f"__ns:={namespace}", "-p", "interface:=socketcand", "-p", "host:=127.0.0.1",
-         "-p", f"port:={hub.port}"],
-        cwd=REPO, env=child_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    try:
+    with DriverOnEmulatedDrive(hardware, namespace, on_frame) as rig:
         publisher = subprocess.run(
             [sys.executable, os.path.abspath(__file__), "publish", f"{namespace}/motor_command", str(total),
              str(RATE_HZ)],
             stdout=subprocess.PIPE, text=True, env=child_env(), cwd=REPO,
             timeout=MATCH_TIMEOUT_S + total / RATE_HZ + 30.0, check=True)
-    finally:
-        node.terminate()
-        try:
-            _, node_log = node.communicate(timeout=30.0)
-        except subprocess.TimeoutExpired:
-            node.kill()
-            _, node_log = node.communicate()
-        stop.set()
-        for thread in threads:
-            thread.join(5.0)
-        hub.close()
+    node_log = rig.node_log
     sent = json.loads(publisher.stdout.strip().splitlines()[-1])
     stamps = sent["stamps_ns"]
 

@@ -39,7 +39,7 @@ import threading
 import time
 from pathlib import Path
 
-from _common import Paced, child_env, percentile, serve_emulated_drive  # noqa: E402 - bench/ is on sys.path (the script's folder)
+from _common import DriverOnEmulatedDrive, Paced, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -71,9 +71,7 @@ def _free_port():
 
 def _watchdog(quick):
     from hopper_ros.canbus.driver import load_motor_driver
-    from hopper_ros.canbus.epos2_emulator import Epos2Emulator
     from hopper_ros.canbus.epos2_objects import Command, State, decode_statusword, rpdo_cob_id, tpdo_cob_id
-    from hopper_ros.canbus.socketcand_server import SocketcandServer
     from hopper_ros.control.config import load_control
 
     hardware = _hardware()
@@ -84,50 +82,23 @@ def _watchdog(quick):
     namespace = f"/hopper_bench_watchdog_{os.getpid()}"
     rpdo1, tpdo1 = rpdo_cob_id(1, node_id), tpdo_cob_id(1, node_id)
     frames = []                                      # (realtime ns, "rpdo"/"tpdo", controlword or state, mA)
-    stop = threading.Event()
-    hub = SocketcandServer("127.0.0.1", 0, "can0").start()
-    drive_bus, spy_bus = hub.local_bus(), hub.local_bus()
-    drive = Epos2Emulator(drive_bus, hardware)
 
-    def spy():
-        while not stop.is_set():
-            frame = spy_bus.recv(timeout=0.05)
-            if frame is None:
-                continue
-            stamp = round(frame.timestamp * 1e9)
-            if frame.arbitration_id == rpdo1 and len(frame.data) == 5:
-                controlword, _, milliamps = struct.unpack("<Hbh", frame.data)
-                frames.append((stamp, "rpdo", controlword, milliamps))
-            elif frame.arbitration_id == tpdo1 and len(frame.data) >= 2:
-                frames.append((stamp, "tpdo", decode_statusword(struct.unpack("<H", frame.data[:2])[0]), 0))
+    def on_frame(frame):
+        stamp = round(frame.timestamp * 1e9)
+        if frame.arbitration_id == rpdo1 and len(frame.data) == 5:
+            controlword, _, milliamps = struct.unpack("<Hbh", frame.data)
+            frames.append((stamp, "rpdo", controlword, milliamps))
+        elif frame.arbitration_id == tpdo1 and len(frame.data) >= 2:
+            frames.append((stamp, "tpdo", decode_statusword(struct.unpack("<H", frame.data[:2])[0]), 0))
 
-    threads = [threading.Thread(target=serve_emulated_drive, args=(drive, stop), daemon=True),
-               threading.Thread(target=spy, daemon=True)]
-    for thread in threads:
-        thread.start()
-    node = subprocess.Popen(
-        [sys.executable, "-m", "hopper_ros.cli", "run", "motor_driver", "--ros-args",
-         "-r", f"__ns:={namespace}", "-p", "interface:=socketcand", "-p", "host:=127.0.0.1",
-         "-p", f"port:={hub.port}"],
-        cwd=REPO, env=child_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    try:
+    with DriverOnEmulatedDrive(hardware, namespace, on_frame, stop_signal=signal.SIGINT) as rig:
         publisher = subprocess.run(
             [sys.executable, os.path.abspath(__file__), "bursts", f"{namespace}/motor_command", str(losses),
              str(repeat)],
             stdout=subprocess.PIPE, text=True, env=child_env(), cwd=REPO,
             timeout=MATCH_TIMEOUT_S + losses * (BURST_S + SILENCE_S) + 30.0, check=True)
         time.sleep(0.2)
-    finally:
-        node.send_signal(signal.SIGINT)
-        try:
-            _, node_log = node.communicate(timeout=30.0)
-        except subprocess.TimeoutExpired:
-            node.kill()
-            _, node_log = node.communicate()
-        stop.set()
-        for thread in threads:
-            thread.join(5.0)
-        hub.close()
+    node_log = rig.node_log
     lasts = json.loads(publisher.stdout.strip().splitlines()[-1])["last_ns"]
     frames.sort()
     stops, disable_cmds, disables, late_current = [], [], [], 0

@@ -36,8 +36,16 @@ def _unit(unit: str) -> str:
     return f" {unit}" if unit else ""
 
 
+@dataclass(frozen=True, kw_only=True)
+class _Spec:
+    """What every kind of value has: its default (required when none) and a description."""
+
+    default: Any = _REQUIRED
+    doc: str = ""
+
+
 @dataclass(frozen=True)
-class Number:
+class Number(_Spec):
     """A finite number (an int where `integer`), in `unit`, within the bounds given."""
 
     unit: str = ""
@@ -47,8 +55,6 @@ class Number:
     le: float | None = None
     integer: bool = False
     choices: tuple = ()
-    default: Any = _REQUIRED
-    doc: str = ""
 
     def check(self, value: Any, where: str) -> Any:
         kind = "an integer" if self.integer else "a number"
@@ -80,12 +86,10 @@ class Number:
 
 
 @dataclass(frozen=True)
-class Text:
+class Text(_Spec):
     """A non-empty string, one of `choices` when given."""
 
     choices: tuple = ()
-    default: Any = _REQUIRED
-    doc: str = ""
 
     def check(self, value: Any, where: str) -> str:
         if not isinstance(value, str) or not value:
@@ -97,11 +101,8 @@ class Text:
 
 
 @dataclass(frozen=True)
-class Flag:
+class Flag(_Spec):
     """true or false."""
-
-    default: Any = _REQUIRED
-    doc: str = ""
 
     def check(self, value: Any, where: str) -> bool:
         if not isinstance(value, bool):
@@ -110,15 +111,13 @@ class Flag:
 
 
 @dataclass(frozen=True)
-class Items:
+class Items(_Spec):
     """A list of `item`, with `min_items` .. `max_items` entries, optionally all different."""
 
     item: Any
     min_items: int = 0
     max_items: int | None = None
     unique: bool = False
-    default: Any = _REQUIRED
-    doc: str = ""
 
     def check(self, value: Any, where: str) -> list:
         if not isinstance(value, list):
@@ -134,11 +133,8 @@ class Items:
 
 
 @dataclass(frozen=True)
-class Anything:
+class Anything(_Spec):
     """Passed through unchecked (a part another module validates, e.g. sim.effects)."""
-
-    default: Any = _REQUIRED
-    doc: str = ""
 
     def check(self, value: Any, where: str) -> Any:
         return value
@@ -149,7 +145,7 @@ Check = Callable[[dict], "tuple[str, str] | None"]
 
 
 @dataclass(frozen=True)
-class Section:
+class Section(_Spec):
     """A mapping with exactly these keys (`fields`); missing required keys and unknown keys are
     errors. `values`: instead of fixed keys, any key (its name checked by `keys`) with values of
     this schema. `checks` run on the converted values."""
@@ -158,8 +154,6 @@ class Section:
     values: Any = None
     keys: tuple = ()
     checks: tuple = ()
-    default: Any = _REQUIRED
-    doc: str = ""
 
     def check(self, value: Any, where: str) -> dict:
         if not isinstance(value, Mapping):

@@ -47,6 +47,22 @@ _ENABLED_STATES = (State.OPERATION_ENABLED,)
 _MAX_SDO_SEGMENTED_SIZE = 1024     # [bytes] largest segmented download accepted
 _SAMPLE_TOLERANCE = 0.999          # a control() call this close to one loop period counts as one
 
+# The drive's side of CiA 402 device control: a command is (controlword mask, value); per state, the
+# commands tried in this order and the state each leads to.
+_SHUTDOWN, _SWITCH_ON, _ENABLE = (0x87, Command.SHUTDOWN), (0x8F, Command.SWITCH_ON), (0x8F, Command.ENABLE_OPERATION)
+_DISABLE_VOLTAGE, _QUICK_STOP = (0x82, Command.DISABLE_VOLTAGE), (0x86, Command.QUICK_STOP)
+_TRANSITIONS = {
+    State.SWITCH_ON_DISABLED: ((_SHUTDOWN, State.READY_TO_SWITCH_ON),),
+    State.READY_TO_SWITCH_ON: ((_SWITCH_ON, State.SWITCHED_ON), (_ENABLE, State.OPERATION_ENABLED),
+                               (_DISABLE_VOLTAGE, State.SWITCH_ON_DISABLED), (_QUICK_STOP, State.SWITCH_ON_DISABLED)),
+    State.SWITCHED_ON: ((_ENABLE, State.OPERATION_ENABLED), (_SHUTDOWN, State.READY_TO_SWITCH_ON),
+                        (_DISABLE_VOLTAGE, State.SWITCH_ON_DISABLED), (_QUICK_STOP, State.SWITCH_ON_DISABLED)),
+    State.OPERATION_ENABLED: ((_SWITCH_ON, State.SWITCHED_ON),          # switch on = disable operation
+                              (_SHUTDOWN, State.READY_TO_SWITCH_ON), (_DISABLE_VOLTAGE, State.SWITCH_ON_DISABLED),
+                              (_QUICK_STOP, State.QUICK_STOP_ACTIVE)),
+    State.QUICK_STOP_ACTIVE: ((_DISABLE_VOLTAGE, State.SWITCH_ON_DISABLED), (_ENABLE, State.OPERATION_ENABLED)),
+}
+
 
 class SdoError(Exception):
     """An SDO request the dictionary refuses, with its CiA 301 abort code."""
@@ -340,42 +356,7 @@ class Epos2Emulator:
         if cw & (1 << od.ControlwordBit.FAULT_RESET):
             self._update_statusword()
             return                               # bit 7 set: no other command (CiA 402)
-        shutdown = cw & 0x87 == Command.SHUTDOWN
-        switch_on = cw & 0x8F == Command.SWITCH_ON
-        enable = cw & 0x8F == Command.ENABLE_OPERATION
-        disable_voltage = cw & 0x82 == Command.DISABLE_VOLTAGE
-        quick_stop = cw & 0x86 == Command.QUICK_STOP
-        if s == State.SWITCH_ON_DISABLED:
-            if shutdown:
-                s = State.READY_TO_SWITCH_ON
-        elif s == State.READY_TO_SWITCH_ON:
-            if switch_on:
-                s = State.SWITCHED_ON
-            elif enable:
-                s = State.OPERATION_ENABLED
-            elif disable_voltage or quick_stop:
-                s = State.SWITCH_ON_DISABLED
-        elif s == State.SWITCHED_ON:
-            if enable:
-                s = State.OPERATION_ENABLED
-            elif shutdown:
-                s = State.READY_TO_SWITCH_ON
-            elif disable_voltage or quick_stop:
-                s = State.SWITCH_ON_DISABLED
-        elif s == State.OPERATION_ENABLED:
-            if switch_on:                        # = disable operation
-                s = State.SWITCHED_ON
-            elif shutdown:
-                s = State.READY_TO_SWITCH_ON
-            elif disable_voltage:
-                s = State.SWITCH_ON_DISABLED
-            elif quick_stop:
-                s = State.QUICK_STOP_ACTIVE
-        elif s == State.QUICK_STOP_ACTIVE:
-            if disable_voltage:
-                s = State.SWITCH_ON_DISABLED
-            elif enable:
-                s = State.OPERATION_ENABLED
+        s = next((target for (mask, value), target in _TRANSITIONS.get(s, ()) if cw & mask == value), s)
         if s != self.state:
             if s == State.OPERATION_ENABLED:
                 self.regulator.reset(int(self._values[(od.POSITION_ACTUAL_VALUE, 0)]))
