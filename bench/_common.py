@@ -1,4 +1,5 @@
 """Helpers shared by the bench modules (not a bench itself: bench/run.py runs bench_*.py only)."""
+import contextlib
 import math
 import os
 import time
@@ -118,3 +119,39 @@ class DriverOnEmulatedDrive:
             thread.join(5.0)
         self._hub.close()
         return False
+
+
+@contextlib.contextmanager
+def motor_command_publisher(node_name, topic, match_timeout_s=30.0):
+    """In a child process: `with motor_command_publisher(name, topic) as (node, publisher):` an rclpy
+    node publishing MotorCommand on `topic` (best effort, depth 1, as the controller), given once
+    the motor driver subscribed and had a second to configure the drive."""
+    import rclpy
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from hopper_ros.msg import MotorCommand
+
+    rclpy.init()
+    node = rclpy.create_node(node_name)
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+    publisher = node.create_publisher(MotorCommand, topic, qos)
+    deadline = time.monotonic() + match_timeout_s
+    while publisher.get_subscription_count() < 1:
+        if time.monotonic() > deadline:
+            raise SystemExit("publisher: the motor driver did not subscribe")
+        time.sleep(0.01)
+    time.sleep(1.0)                                   # the driver configures the drive meanwhile
+    yield node, publisher
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+def child_role(roles):
+    """A bench module run as a child process, `python bench_x.py ROLE ARG...`: calls roles[ROLE](*ARGS)
+    with DDS on loopback."""
+    import sys
+
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if sys.argv[1] not in roles:
+        raise SystemExit(f"unknown role {sys.argv[1]}")
+    roles[sys.argv[1]](*sys.argv[2:])

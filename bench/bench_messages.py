@@ -15,7 +15,7 @@ import subprocess
 import sys
 import time
 
-from _common import Paced, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
+from _common import Paced, child_env, child_role, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 COUNT = 2000          # measured messages
 QUICK_COUNT = 500
@@ -140,11 +140,5 @@ def _publish(topic, total, rate_hz):
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    role, topic_arg = sys.argv[1], sys.argv[2]
-    if role == "subscribe":
-        _subscribe(topic_arg, int(sys.argv[3]), int(sys.argv[4]))
-    elif role == "publish":
-        _publish(topic_arg, int(sys.argv[3]), float(sys.argv[4]))
-    else:
-        raise SystemExit(f"unknown role {role}")
+    child_role({"subscribe": lambda topic, total, warmup: _subscribe(topic, int(total), int(warmup)),
+                "publish": lambda topic, total, rate_hz: _publish(topic, int(total), float(rate_hz))})

@@ -22,7 +22,9 @@ import sys
 import time
 from pathlib import Path
 
-from _common import DriverOnEmulatedDrive, Paced, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
+# bench/ is on sys.path (the script's folder)
+from _common import (DriverOnEmulatedDrive, Paced, child_env, child_role,  # noqa: E402
+                     motor_command_publisher, percentile)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -98,40 +100,22 @@ def run(quick=False):
 # ---------------------------------------------------------------------------- publisher process
 
 def _publish(topic, total, rate_hz):
-    import rclpy
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-
     from hopper_ros.hardware.config import load_hardware
     from hopper_ros.msg import MotorCommand
 
     hardware = load_hardware()
-    rclpy.init()
-    node = rclpy.create_node("hopper_bench_motor_command")
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-    publisher = node.create_publisher(MotorCommand, topic, qos)
-    deadline = time.monotonic() + MATCH_TIMEOUT_S
-    while publisher.get_subscription_count() < 1:
-        if time.monotonic() > deadline:
-            raise SystemExit("publisher: the motor driver did not subscribe")
-        time.sleep(0.01)
-    time.sleep(1.0)                                   # the driver configures the drive meanwhile
-    msg = MotorCommand(mode=MotorCommand.MODE_CURRENT)
-    stamps = []
-    pace = Paced(total, 1.0 / rate_hz)
-    for sequence in pace:
-        msg.setpoint = _torque_for(sequence, hardware)
-        msg.header.stamp = node.get_clock().now().to_msg()
-        now = time.time_ns()
-        publisher.publish(msg)
-        stamps.append(now)
-    print(json.dumps({"rate_hz": pace.rate_hz, "stamps_ns": stamps}), flush=True)
-    node.destroy_node()
-    rclpy.shutdown()
+    with motor_command_publisher("hopper_bench_motor_command", topic, MATCH_TIMEOUT_S) as (node, publisher):
+        msg = MotorCommand(mode=MotorCommand.MODE_CURRENT)
+        stamps = []
+        pace = Paced(total, 1.0 / rate_hz)
+        for sequence in pace:
+            msg.setpoint = _torque_for(sequence, hardware)
+            msg.header.stamp = node.get_clock().now().to_msg()
+            now = time.time_ns()
+            publisher.publish(msg)
+            stamps.append(now)
+        print(json.dumps({"rate_hz": pace.rate_hz, "stamps_ns": stamps}), flush=True)
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    if sys.argv[1] == "publish":
-        _publish(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
-    else:
-        raise SystemExit(f"unknown role {sys.argv[1]}")
+    child_role({"publish": lambda topic, total, rate_hz: _publish(topic, int(total), float(rate_hz))})

@@ -39,7 +39,9 @@ import threading
 import time
 from pathlib import Path
 
-from _common import DriverOnEmulatedDrive, Paced, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
+# bench/ is on sys.path (the script's folder)
+from _common import (DriverOnEmulatedDrive, Paced, child_env, child_role,  # noqa: E402
+                     motor_command_publisher, percentile)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -135,38 +137,24 @@ def _watchdog(quick):
 
 def _bursts(topic, losses, repeat):
     """Child: `losses` bursts of commands every `repeat` s, each followed by silence; prints the last stamps."""
-    import rclpy
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-
     from hopper_ros.msg import MotorCommand
 
-    rclpy.init()
-    node = rclpy.create_node("hopper_bench_watchdog_commands")
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-    publisher = node.create_publisher(MotorCommand, topic, qos)
-    deadline = time.monotonic() + MATCH_TIMEOUT_S
-    while publisher.get_subscription_count() < 1:
-        if time.monotonic() > deadline:
-            raise SystemExit("publisher: the motor driver did not subscribe")
-        time.sleep(0.01)
-    time.sleep(1.0)                                   # the driver configures the drive meanwhile
-    msg = MotorCommand(mode=MotorCommand.MODE_CURRENT)
-    lasts = []
-    per_burst = int(BURST_S / repeat)
-    sequence = 0
-    for _ in range(losses):
-        last = 0
-        for _ in Paced(per_burst, repeat):
-            sequence += 1
-            msg.setpoint = 0.5 + 0.001 * (sequence % 500)         # a new current every command
-            msg.header.stamp = node.get_clock().now().to_msg()
-            last = time.time_ns()
-            publisher.publish(msg)
-        lasts.append(last)
-        time.sleep(SILENCE_S)
-    print(json.dumps({"last_ns": lasts}), flush=True)
-    node.destroy_node()
-    rclpy.shutdown()
+    with motor_command_publisher("hopper_bench_watchdog_commands", topic, MATCH_TIMEOUT_S) as (node, publisher):
+        msg = MotorCommand(mode=MotorCommand.MODE_CURRENT)
+        lasts = []
+        per_burst = int(BURST_S / repeat)
+        sequence = 0
+        for _ in range(losses):
+            last = 0
+            for _ in Paced(per_burst, repeat):
+                sequence += 1
+                msg.setpoint = 0.5 + 0.001 * (sequence % 500)         # a new current every command
+                msg.header.stamp = node.get_clock().now().to_msg()
+                last = time.time_ns()
+                publisher.publish(msg)
+            lasts.append(last)
+            time.sleep(SILENCE_S)
+        print(json.dumps({"last_ns": lasts}), flush=True)
 
 
 # ---------------------------------------------------------------------------- hub abuse
@@ -560,8 +548,4 @@ def run(quick=False):
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    if sys.argv[1] == "bursts":
-        _bursts(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
-    else:
-        raise SystemExit(f"unknown role {sys.argv[1]}")
+    child_role({"bursts": lambda topic, losses, repeat: _bursts(topic, int(losses), float(repeat))})

@@ -303,18 +303,14 @@ def test_current_setpoint_by_remapped_pdo_moves_the_motor(rig):
     node.tpdo.read()
     node.rpdo.read()
     # the canopen library's standard remapping: disable, sub0 = 0, entries, count, enable
-    node.rpdo[1].clear()
-    node.rpdo[1].add_variable("Controlword")
-    node.rpdo[1].add_variable("Modes of operation")
-    node.rpdo[1].add_variable("Current mode setting value")
-    node.rpdo[1].trans_type = 255
-    node.rpdo[1].enabled = True
-    node.tpdo[1].clear()
-    node.tpdo[1].add_variable("Statusword")
-    node.tpdo[1].add_variable("Position actual value")
-    node.tpdo[1].add_variable("Current actual value")
-    node.tpdo[1].trans_type = 1
-    node.tpdo[1].enabled = True
+    for pdo, variables, trans_type in (
+            (node.rpdo[1], ("Controlword", "Modes of operation", "Current mode setting value"), 255),
+            (node.tpdo[1], ("Statusword", "Position actual value", "Current actual value"), 1)):
+        pdo.clear()
+        for name in variables:
+            pdo.add_variable(name)
+        pdo.trans_type = trans_type
+        pdo.enabled = True
     node.rpdo.save()
     node.tpdo.save()
     assert node.sdo[0x1600][0].raw == 3 and node.sdo[0x1600][3].raw == 0x20300010

@@ -177,11 +177,8 @@ def run_with_sim_robot(rclpy_session, hopper_cli, tmp_path, mode: str, duration:
         assert spin_until(listener.executor, all_reported), [
             (d.name, counters_of(d)) for d in got_reports(listener)]
         listener.spin_for(0.5)                       # the tail of the topics
-        stop(nodes)
-        nodes = []
     finally:
-        if nodes:
-            stop(nodes)
+        stop(nodes)
         listener.close()
     return listener
 
@@ -314,11 +311,8 @@ def test_bad_packets_are_counted_dropped_and_never_change_an_event(rclpy_session
         assert spin_until(listener.executor, bridge_reported_all)
         listener.spin_for(1.0)
         got = listener.got
-        stop(nodes)
-        nodes = []
     finally:
-        if nodes:
-            stop(nodes)
+        stop(nodes)
         listener.close()
 
     counters = counters_of(listener.diagnostics("/encoder_bridge"))

@@ -11,8 +11,8 @@ usage: python socketcand_canopen_master.py PORT EDS NODE_ID
 import sys
 import time
 
-import canopen
 from canopen.sdo.exceptions import SdoAbortedError
+from canopen_client import connect
 
 TIMEOUT = 5.0
 
@@ -42,12 +42,8 @@ def sync_and_receive(network, node, pdos=(1, 2)) -> None:
 
 
 def main() -> int:
-    port, eds, node_id = int(sys.argv[1]), sys.argv[2], int(sys.argv[3])
-    network = canopen.Network()
-    network.connect(interface="socketcand", host="127.0.0.1", port=port, channel="can0")
+    network, node = connect(sys.argv)
     try:
-        node = canopen.RemoteNode(node_id, eds)
-        network.add_node(node)
         report("heartbeat", node.nmt.wait_for_heartbeat(TIMEOUT))
         report("device_type", hex(node.sdo[0x1000].raw))
         report("device_name", node.sdo[0x1008].raw)
@@ -87,7 +83,7 @@ def main() -> int:
             node.sdo.upload(0x2345, 0)
         except SdoAbortedError as exc:
             report("abort", hex(exc.code))
-        network.send_message(0x200 + node_id, b"\x0f")   # RPDO1 one byte short
+        network.send_message(0x200 + node.id, b"\x0f")   # RPDO1 one byte short
         wait_emcy(node, 0x8210)
         report("emcy", "0x8210")
         node.sdo["Controlword"].raw = 0x00            # fault reset acts on the rising edge of bit 7

@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 
-import canopen
+from canopen_client import connect
 
 SYNC_PERIOD = 0.001
 SDO_PERIOD = 0.02
@@ -85,13 +85,8 @@ def run_phase(network, node, name: str, seconds: float) -> str:
 
 
 def main() -> int:
-    port, eds, node_id = int(sys.argv[1]), sys.argv[2], int(sys.argv[3])
-    network = canopen.Network()
-    network.connect(interface="socketcand", host="127.0.0.1", port=port, channel="can0")
+    network, node = connect(sys.argv, sdo_timeout=SDO_TIMEOUT)
     try:
-        node = canopen.RemoteNode(node_id, eds)
-        node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT
-        network.add_node(node)
         node.nmt.wait_for_heartbeat(5.0)
         node.nmt.state = "OPERATIONAL"
         node.nmt.wait_for_heartbeat(5.0)
