@@ -10,6 +10,7 @@ fifteen` naming neither file nor key).
 from __future__ import annotations
 
 import copy
+import dataclasses
 import os
 import subprocess
 import sys
@@ -20,8 +21,11 @@ import pytest
 import yaml
 
 from conftest import REPO
+from hopper_ros.canbus.driver import NODE_KEYS, load_motor_driver
 from hopper_ros.config import load_yaml
 from hopper_ros.config_schemas import CONTROL, HARDWARE, IDENTIFICATION, MODEL, MOTOR_DRIVER, SCHEDULE, SENSING, SIM
+from hopper_ros.control.config import load_control
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.schema import ConfigError, Items, Number, Section, Text, load_config, validate
 
 DELETE = object()
@@ -59,6 +63,30 @@ def test_the_validator_names_the_key_and_converts():
     ("setpoints/fig5_5.yaml", SCHEDULE)])
 def test_every_shipped_config_file_passes_its_schema(name, schema):
     load_config(name, schema)
+
+
+@pytest.mark.parametrize("name", ["hardware.yaml", "demo/hardware_500hz.yaml"])
+def test_the_typed_hardware_config_holds_exactly_the_checked_file(name):
+    typed = dataclasses.asdict(load_hardware(name))
+    for key, encoder in typed["encoders"].items():
+        assert encoder.pop("name") == key
+    typed["can"] = {key: value for key, value in typed["can"].items() if value is not None}
+    checked = load_config(name, HARDWARE)
+    assert typed == checked
+    assert all(type(typed[s][k]) is type(v) for s in checked for k, v in checked[s].items() if s != "encoders")
+
+
+@pytest.mark.parametrize("name", ["motor_driver.yaml", "demo/motor_driver.yaml"])
+def test_the_typed_motor_driver_config_holds_the_checked_file(name):
+    config, checked = load_motor_driver(name), load_config(name, MOTOR_DRIVER)["motor_driver"]
+    typed = {**dataclasses.asdict(config.driver), **{key: getattr(config, key) for key in NODE_KEYS}}
+    assert {key: typed[key] for key in checked} == checked
+
+
+def test_the_typed_control_config_holds_the_checked_file():
+    config, checked = load_control(), load_config("control.yaml", CONTROL)
+    assert dataclasses.asdict(config.deadbeat) == checked["deadbeat"]
+    assert {key: getattr(config.stride, key) for key in checked["stride"]} == checked["stride"]
 
 
 # ------------------------------------------------------------------ bad files given to nodes and tools
