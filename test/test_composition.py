@@ -16,6 +16,7 @@ from conftest import SAFETY_TIMEOUT, free_port, spin_until
 from hopper_ros.config import load_yaml
 from hopper_ros.harness.sensing_evaluation import record_experiments
 from hopper_ros.hardware import packet as packet_format
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.launcher import LaunchFileError, load_launch, parse_launch
 from hopper_ros.sim.config import load_sim_config
 from hopper_ros.sim.robot import SimRobot
@@ -211,7 +212,7 @@ class ComposedChain:
 
 
 def experiment_datagrams(duration: float) -> list[bytes]:
-    recording = record_experiments(SimRobot(load_sim_config(), load_yaml("hardware.yaml")), duration, seed=4)
+    recording = record_experiments(SimRobot(load_sim_config(), load_hardware()), duration, seed=4)
     return [packet_format.encode(p) for p in recording.packets]
 
 
