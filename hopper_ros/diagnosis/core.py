@@ -711,11 +711,11 @@ def _exchange(data, base, chosen, ranking, settings, current_sse, current_errors
     return None
 
 
-def _with_secondary(data, stack, r, p, settings, sse, errors) -> dict | None:
+def _with_secondary(data, stack, r, p, settings, sse, errors, guarded: bool = True) -> dict | None:
     """`r`'s candidate with its secondary parameter `p` on a grid, geometric between its bounds, with the
     model's own value in place of a grid value within half a step of it, the magnitude refitted at each (on
     top of `stack`); the best value other than the model's when held-out strides prefer it (paired t of at
-    least `min_t`), else None."""
+    least `min_t`) and (`guarded`) it passes its guards, else None."""
     own = float(getattr(stack.variant().coefficients, p.coefficient))
     grid = np.geomspace(p.low, p.high, settings.secondary_grid)
     step = (p.high / p.low) ** (0.5 / max(settings.secondary_grid - 1, 1))   # half a grid step
@@ -723,7 +723,8 @@ def _with_secondary(data, stack, r, p, settings, sse, errors) -> dict | None:
     tried = {v: _search(data, stack, [r["candidate"].holding(p, v)], settings, sse, errors)[0] for v in values}
     value = min(tried, key=lambda v: tried[v]["held_sse"].sum())
     best = tried[value]
-    if value == own or not best["significant"] or _paired_t(tried[own]["held_sse"], best["held_sse"]) < settings.min_t:
+    if value == own or (guarded and not best["significant"]) or \
+            _paired_t(tried[own]["held_sse"], best["held_sse"]) < settings.min_t:
         return None
     return best
 
@@ -745,14 +746,15 @@ def _secondary_look_alikes(data, stack, ranking, settings, sse, errors) -> list[
     return sorted(out, key=lambda r: -r["reduction"])
 
 
-def _fit_secondary(data, base, chosen, settings) -> None:
-    """Each accepted entry's secondary parameters (`_with_secondary`), beside the other accepted effects."""
-    for i in range(len(chosen)):
+def _fit_secondary(data, base, chosen, settings, only=None, guarded: bool = True) -> None:
+    """Each accepted entry's secondary parameters (`_with_secondary`), beside the other accepted effects (`only`:
+    those of these indices)."""
+    for i in range(len(chosen)) if only is None else only:
         for p in chosen[i]["candidate"].secondary:
             r, others = chosen[i], chosen[:i] + chosen[i + 1:]
             stack = Stack(base, others)
             sse, errors = _baseline(data, stack)
-            best = _with_secondary(data, stack, r, p, settings, sse, errors)
+            best = _with_secondary(data, stack, r, p, settings, sse, errors, guarded)
             if best is None:
                 continue
             _polish(data, base, others, best, settings, sse, errors)
@@ -762,30 +764,35 @@ def _fit_secondary(data, base, chosen, settings) -> None:
 
 def _discovered_look_alikes(data, base, chosen, settings, log) -> None:
     """Each accepted library effect beside the term sets discovered where it acts, with the other accepted effects
-    in place: a set that passes its guards there and fits held-out strides not clearly worse (paired t below
+    in place, or one of them replaced by a look-alike of its own (a softer leg by the compliant ground it could not
+    be told from): a set that passes its guards there and fits held-out strides not clearly worse (paired t below
     `tie_t`) is reported as its look-alike. The rounds that found the set decided the name; this says what else the
-    data allow (a flight-only lift beside the effective gravity it looks like in flight, once a compliant ground
-    has been explained in stance)."""
+    data allow (a flight-only lift beside the lower gravity it looks like in flight, once a compliant ground has
+    been explained in stance by the ground itself rather than by a softer leg)."""
     for i, r in enumerate(chosen):
         c = r["candidate"]
         if c.kind == "discovered":
             continue
         ties = r.setdefault("ties", [])
-        known = {t["name"] for t in ties}
-        sites = [site for site in candidate_sites(c) if site in LOCATE_SITES and f"discovered_{site}" not in known]
-        if not sites:
-            continue
-        stack = Stack(base, chosen[:i] + chosen[i + 1:])
-        _, sets = locate(data, stack.variant())
-        found = [f for f in (discover_site(site, sets) for site in sites) if f is not None]
-        if not found:
-            continue
-        log["discoveries"].extend(found)
-        sse, errors = _baseline(data, stack)
-        ranking = _search(data, stack, [c] + [discovered_candidate(f) for f in found], settings, sse, errors)
-        own = next(x for x in ranking if x["name"] == c.name)
-        ties += [x for x in ranking if x is not own and x["significant"]
-                 and _paired_t(x["held_sse"], own["held_sse"]) < settings.tie_t]
+        others = chosen[:i] + chosen[i + 1:]
+        contexts = [others] + [others[:j] + [dict(t)] + others[j + 1:] for j, o in enumerate(others)
+                               for t in o.get("ties", []) if t["candidate"].kind != "discovered"]
+        for context in contexts:
+            known = {t["name"] for t in ties}
+            sites = [site for site in candidate_sites(c) if site in LOCATE_SITES and f"discovered_{site}" not in known]
+            if not sites:
+                break
+            stack = Stack(base, context)
+            _, sets = locate(data, stack.variant())
+            found = [f for f in (discover_site(site, sets) for site in sites) if f is not None]
+            if not found:
+                continue
+            log["discoveries"].extend(found)
+            sse, errors = _baseline(data, stack)
+            ranking = _search(data, stack, [c] + [discovered_candidate(f) for f in found], settings, sse, errors)
+            own = next(x for x in ranking if x["name"] == c.name)
+            ties += [x for x in ranking if x is not own and x["significant"]
+                     and _paired_t(x["held_sse"], own["held_sse"]) < settings.tie_t]
 
 
 def _cumulative_errors(data, base, chosen, fold) -> None:
@@ -877,6 +884,10 @@ def _rounds(data, base, settings, excited, chosen, current_sse, current_errors, 
         top["alternatives"] = [r["candidate"] for r in ranking[:settings.screen] if r is not top]
         _polish(data, base, chosen, top, settings, current_sse, current_errors)
         chosen.append(top)
+        # its secondary parameters now, so that the next rounds search on top of it as the data have it (a
+        # compliant ground at the model's damping makes a flight-only lift look like a lower gravity)
+        _fit_secondary(data, base, chosen, settings, only=[len(chosen) - 1])
+        top = chosen[-1]
         current_sse, current_errors = top["held_sse"], top["errors"]
         if len(chosen) > 1:
             current_sse, current_errors = _revisit(data, base, chosen, settings, current_sse, current_errors)
@@ -910,9 +921,11 @@ def _restarts(data, base, settings, excited, chosen, log, fold, base_errors) -> 
     best_sse, best_pred = _held_out(data, base, chosen, fold)
     best, best_errors = chosen, _errors(data, best_pred)
     for r, smaller in pool:
-        start = dict(r, ties=[], location=[], alternatives=[x["candidate"] for x in log["first_ranking"]
-                                                             [:settings.screen] if x["name"] != r["name"]])
-        trial, _, _ = _rounds(data, base, settings, excited, [start], r["held_sse"], r["errors"],
+        start = [dict(r, ties=[], location=[], alternatives=[x["candidate"] for x in log["first_ranking"]
+                                                              [:settings.screen] if x["name"] != r["name"]])]
+        # (its secondary parameters fitted first, unguarded: alone it may fail an apex guard for want of a partner)
+        _fit_secondary(data, base, start, settings, guarded=False)
+        trial, _, _ = _rounds(data, base, settings, excited, start, start[0]["held_sse"], start[0]["errors"],
                               {"rounds": [], "discoveries": []})
         trial = [e for e in trial if e["candidate"].kind != "sensor" or _plausible(e)]
         fewest, most = (1, len(chosen) - 1) if smaller else (2, settings.max_effects)
