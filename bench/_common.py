@@ -61,6 +61,35 @@ def serve_emulated_drive(drive, stop):
         time.sleep(0.0005)
 
 
+REALTIME_PRIORITY = 50      # SCHED_FIFO priority of the demo's loop (launch/demo.launch.yaml)
+
+
+def available_realtime_priority() -> int:
+    """REALTIME_PRIORITY where this process may use SCHED_FIFO, else 0 (normal scheduling)."""
+    from hopper_ros.environment import realtime_scheduling_allowed
+
+    return REALTIME_PRIORITY if realtime_scheduling_allowed()[0] else 0
+
+
+@contextlib.contextmanager
+def realtime(priority):
+    """`with realtime(priority):` every thread of this process (and those started meanwhile) on SCHED_FIFO at
+    `priority` (0: unchanged), as the demo's loop runs; normal scheduling again on leaving."""
+    from hopper_ros.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority
+
+    if priority:
+        apply_realtime_priority({REALTIME_PRIORITY_VAR: str(priority)})
+    try:
+        yield
+    finally:
+        if priority:
+            for thread_id in (int(t) for t in os.listdir("/proc/self/task")):
+                try:
+                    os.sched_setscheduler(thread_id, os.SCHED_OTHER, os.sched_param(0))
+                except ProcessLookupError:
+                    pass
+
+
 class DriverOnEmulatedDrive:
     """`with DriverOnEmulatedDrive(hardware, namespace, on_frame) as rig:` this process serves the
     socketcand hub on loopback with an emulated EPOS2 on it (a thread) and a bus spy calling
@@ -68,10 +97,11 @@ class DriverOnEmulatedDrive:
     motor_driver`, socketcand client, in `namespace`). On leaving, the node is stopped with
     `stop_signal` and its stderr is `rig.node_log`."""
 
-    def __init__(self, hardware, namespace, on_frame, stop_signal=None):
+    def __init__(self, hardware, namespace, on_frame, stop_signal=None, realtime_priority=0):
         import signal
 
         self.hardware, self.namespace, self.on_frame = hardware, namespace, on_frame
+        self.realtime_priority = realtime_priority       # the node's SCHED_FIFO priority (0: normal scheduling)
         self.stop_signal = signal.SIGTERM if stop_signal is None else stop_signal
         self.node_log = ""
 
@@ -102,7 +132,8 @@ class DriverOnEmulatedDrive:
             [sys.executable, "-m", "hopper_ros.cli", "run", "motor_driver", "--ros-args",
              "-r", f"__ns:={self.namespace}", "-p", "interface:=socketcand", "-p", "host:=127.0.0.1",
              "-p", f"port:={self._hub.port}"],
-            cwd=REPO, env=child_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+            cwd=REPO, env=dict(child_env(), HOPPER_REALTIME_PRIORITY=str(self.realtime_priority)),
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         return self
 
     def __exit__(self, *exc_info):

@@ -8,8 +8,12 @@ namespace). Child 2: a publisher of MotorCommand at 1 kHz (current mode), taking
 just before each publish(); every command's torque maps to a distinct current setting, so the
 RPDO of each command is known.
 
+Every process of the main run (node, publisher, this one's threads) on SCHED_FIFO at priority 50,
+as the demo's loop runs (normal scheduling where that is not permitted: `motor_realtime_priority`
+0); the same with normal scheduling: *_normal_scheduling.
+
 Figures: motor_cmd_to_frame_p50_us / _p99_us / _max_us (publish -> the RPDO carrying that
-command on the bus), motor_cmd_superseded (commands whose RPDO never showed), motor_cmd_publish_rate_hz. The
+command on the bus; target p99 < 1000 us), motor_cmd_superseded (commands whose RPDO never showed), motor_cmd_publish_rate_hz. The
 watchdog's figures (watchdog_stop_ms, watchdog_disable_ms over a dozen lost streams) are
 bench_robustness's. A command counts as superseded when a newer one reached the driver
 first (the driver keeps only the latest: stale setpoints are not sent).
@@ -23,8 +27,8 @@ import time
 from pathlib import Path
 
 # bench/ is on sys.path (the script's folder)
-from _common import (DriverOnEmulatedDrive, Paced, child_env, child_role,  # noqa: E402
-                     motor_command_publisher, percentile)
+from _common import (DriverOnEmulatedDrive, Paced, available_realtime_priority, child_env,  # noqa: E402
+                     child_role, motor_command_publisher, percentile, realtime)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -47,16 +51,17 @@ def _torque_for(sequence, hardware):
     return milliamps / 1000.0 * hardware.motor.torque_constant * hardware.motor.gear_ratio
 
 
-def run(quick=False):
+def _measure(count, priority):
+    """Publish -> RPDO latencies [us] of `count` commands (after WARMUP), every process of the run (the node, the
+    publisher, this one's hub, drive and spy) on SCHED_FIFO at `priority` (0: normal scheduling); and the number
+    superseded, the publisher's rate."""
     from hopper_ros.canbus.epos2_objects import rpdo_cob_id
     from hopper_ros.hardware.config import load_hardware
 
     hardware = load_hardware()
-    node_id = hardware.drive.node_id
-    count = QUICK_COUNT if quick else COUNT
     total = WARMUP + count
-    namespace = f"/hopper_bench_motor_{os.getpid()}"
-    rpdo1 = rpdo_cob_id(1, node_id)
+    namespace = f"/hopper_bench_motor_{os.getpid()}_{priority}"
+    rpdo1 = rpdo_cob_id(1, hardware.drive.node_id)
     frames = []                                      # (realtime ns on the bus, controlword, mA) of every RPDO1
 
     def on_frame(frame):
@@ -64,12 +69,12 @@ def run(quick=False):
             controlword, _, milliamps = struct.unpack("<Hbh", frame.data)
             frames.append((round(frame.timestamp * 1e9), controlword, milliamps))
 
-    with DriverOnEmulatedDrive(hardware, namespace, on_frame) as rig:
+    with realtime(priority), DriverOnEmulatedDrive(hardware, namespace, on_frame, realtime_priority=priority) as rig:
         publisher = subprocess.run(
             [sys.executable, os.path.abspath(__file__), "publish", f"{namespace}/motor_command", str(total),
              str(RATE_HZ)],
-            stdout=subprocess.PIPE, text=True, env=child_env(), cwd=REPO,
-            timeout=MATCH_TIMEOUT_S + total / RATE_HZ + 30.0, check=True)
+            stdout=subprocess.PIPE, text=True, env=dict(child_env(), HOPPER_REALTIME_PRIORITY=str(priority)),
+            cwd=REPO, timeout=MATCH_TIMEOUT_S + total / RATE_HZ + 30.0, check=True)
     node_log = rig.node_log
     sent = json.loads(publisher.stdout.strip().splitlines()[-1])
     stamps = sent["stamps_ns"]
@@ -88,21 +93,35 @@ def run(quick=False):
     latencies_us.sort()
     if not latencies_us:
         raise RuntimeError(f"no command reached the bus; node log:\n{node_log[-3000:]}")
+    return latencies_us, lost, sent["rate_hz"]
+
+
+def run(quick=False):
+    priority = available_realtime_priority()
+    latencies_us, lost, rate_hz = _measure(QUICK_COUNT if quick else COUNT, priority)
+    normal_us, _, _ = _measure(QUICK_COUNT if quick else COUNT, 0)
     return [
         {"name": "motor_cmd_to_frame_p50_us", "value": round(percentile(latencies_us, 0.50), 1), "unit": "us"},
         {"name": "motor_cmd_to_frame_p99_us", "value": round(percentile(latencies_us, 0.99), 1), "unit": "us"},
         {"name": "motor_cmd_to_frame_max_us", "value": round(latencies_us[-1], 1), "unit": "us"},
         {"name": "motor_cmd_superseded", "value": lost, "unit": "msgs"},
-        {"name": "motor_cmd_publish_rate_hz", "value": round(sent["rate_hz"], 1), "unit": "Hz"},
+        {"name": "motor_cmd_publish_rate_hz", "value": round(rate_hz, 1), "unit": "Hz"},
+        {"name": "motor_realtime_priority", "value": priority, "unit": "SCHED_FIFO"},
+        {"name": "motor_cmd_to_frame_p50_us_normal_scheduling", "value": round(percentile(normal_us, 0.50), 1),
+         "unit": "us"},
+        {"name": "motor_cmd_to_frame_p99_us_normal_scheduling", "value": round(percentile(normal_us, 0.99), 1),
+         "unit": "us"},
     ]
 
 
 # ---------------------------------------------------------------------------- publisher process
 
 def _publish(topic, total, rate_hz):
+    from hopper_ros.environment import apply_realtime_priority
     from hopper_ros.hardware.config import load_hardware
     from hopper_ros.msg import MotorCommand
 
+    apply_realtime_priority()                        # HOPPER_REALTIME_PRIORITY, as the run asks
     hardware = load_hardware()
     with motor_command_publisher("hopper_bench_motor_command", topic, MATCH_TIMEOUT_S) as (node, publisher):
         msg = MotorCommand(mode=MotorCommand.MODE_CURRENT)
