@@ -53,7 +53,7 @@ import sys
 import time
 from pathlib import Path
 
-from _common import Paced, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
+from _common import Paced, available_realtime_priority, child_env, percentile  # noqa: E402 - bench/ is on sys.path (the script's folder)
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -70,7 +70,6 @@ PERIOD_S = 1e-3
 START_TIMEOUT_S = 60.0
 NODES = ("encoder_bridge", "state_estimator", "event_detector")
 COMPONENTS = ("hopper_ros::EncoderBridge", "hopper_ros::StateEstimator", "hopper_ros::EventDetector")
-REALTIME_PRIORITY = 50   # SCHED_FIFO of every process of the main run, as in launch/demo.launch.yaml
 
 
 
@@ -429,10 +428,8 @@ def _handover(duration, intra_process):
 
 
 def run(quick=False):
-    from hopper_ros.environment import realtime_scheduling_allowed
-
     costs = stage_costs(QUICK_COST_DURATION_S if quick else COST_DURATION_S)
-    priority = REALTIME_PRIORITY if realtime_scheduling_allowed()[0] else 0
+    priority = available_realtime_priority()     # SCHED_FIFO of every process of the main run, as in the demo
     result = latency(QUICK_DURATION_S if quick else DURATION_S, realtime_priority=priority)
     events = result["event_latency"]
     if not events:
