@@ -53,7 +53,7 @@ class Discovery:
         library = SITE_LIBRARY[self.site][0]
         hinge = hinge_of(self.field)
         out = []
-        for (key, words, unit, _), c in zip(library, self.coefficients):
+        for (key, words, unit), c in zip(library.terms, self.coefficients):
             if c:
                 if hinge and key == hinge[0]:
                     symbol = key.split(">")[1]
@@ -95,8 +95,8 @@ def _context(kind: str, ctx: dict, knot: float = 0.0):
     if kind == "flight":
         return laws.FlightContext(ctx["y"], ctx["z"], ctx["ydot"], ctx["zdot"], knot)
     if kind == "stance":
-        return laws.StanceContext(ctx["rho"], ctx["rho_dot"], ctx["rest_length"], ctx["theta"], ctx["theta_dot"],
-                                  ctx["theta_td"], ctx["since_touchdown"], ctx["torque"], ctx["command"], knot)
+        return laws.stance_context(ctx["rho"], ctx["rho_dot"], ctx["rest_length"], ctx["theta"], ctx["theta_dot"],
+                                   ctx["theta_td"], ctx["since_touchdown"], ctx["torque"], ctx["command"], knot)
     return laws.JumpContext(ctx["along"], ctx["across"])
 
 
@@ -128,7 +128,7 @@ def site_samples(site: str, sets, knot: float = 0.0) -> list[tuple[np.ndarray, n
         else:
             bias = np.full_like(values, bias_values[0])
         context = _context(kind, ctx, knot)
-        X = np.column_stack([np.broadcast_to(term(context), values.shape) for _, _, _, term in library])
+        X = np.column_stack([np.broadcast_to(library.value(i, context), values.shape) for i in range(len(library.terms))])
         ok = np.all(np.isfinite(X), axis=1) & np.isfinite(values - bias)
         if ok.any():
             out.append((X[ok], (values - bias)[ok]))
@@ -191,7 +191,7 @@ def discover_site(site: str, sets, max_terms: int = 3) -> Discovery | None:
     """The term set (and hinge knot) of `site` that held-out strides prefer, or None."""
     library, field, _ = SITE_LIBRARY[site]
     hinge = hinge_of(field)
-    hinge_column = [k for k, *_ in library].index(hinge[0]) if hinge else -1
+    hinge_column = [k for k, *_ in library.terms].index(hinge[0]) if hinge else -1
     trials = []
 
     def trial(knot):
@@ -222,5 +222,5 @@ def discover_site(site: str, sets, max_terms: int = 3) -> Discovery | None:
     coef = np.zeros(gram.shape[1])
     coef[list(subset)] = _solve(gram.sum(axis=0)[ix], rhs.sum(axis=0)[list(subset)])
     used = hinge_column in subset
-    return Discovery(site, field, tuple(float(c) for c in coef), tuple(k for k, *_ in library), explained, t,
+    return Discovery(site, field, tuple(float(c) for c in coef), tuple(k for k, *_ in library.terms), explained, t,
                      knot if used else 0.0)

@@ -19,13 +19,13 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from hopper_ros.physics import lanes, laws
 
 from .data import LEAD_RESOLVED, StrideData
 from .ringing import CHANNEL_SITE, ringing, since_liftoff
 from .simulate import Variant
+from .smoothing import smooth
 
 FLIGHT_WINDOW = 71     # samples of the Savitzky-Golay fit in flight
 STANCE_WINDOW = 19     # ... in stance
@@ -73,14 +73,6 @@ def _crossings(t, g):
     return td, lo
 
 
-def _smooth(x, window, period):
-    w = min(window, len(x) - (1 - len(x) % 2))
-    if w < 7:
-        return None
-    return (savgol_filter(x, w, 3, deriv=0), savgol_filter(x, w, 3, deriv=1, delta=period),
-            savgol_filter(x, w, 3, deriv=2, delta=period))
-
-
 def _velocity_at(t, x, t_event, degree):
     if len(t) < degree + 3:
         return np.nan
@@ -102,7 +94,7 @@ def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients)
     # ---- flight
     fh, fv, ctx_parts, u_parts, bins_h, bins_v = [], [], [], [], [], []
     for name, (a, b) in (("descent", (0, i_td)), ("ascent", (i_lo, len(t)))):
-        sm_y, sm_z = _smooth(y[a:b], FLIGHT_WINDOW, period), _smooth(z[a:b], FLIGHT_WINDOW, period)
+        sm_y, sm_z = smooth(y[a:b], FLIGHT_WINDOW, period), smooth(z[a:b], FLIGHT_WINDOW, period)
         if sm_y is None or sm_z is None or b - a <= 2 * EDGE + 5:
             bins_h.append(np.nan)
             bins_v.append(np.nan)
@@ -131,7 +123,7 @@ def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients)
     toe_y = np.nan
     if b - a > 2 * EDGE + 9:
         toe_y = float(np.median(y[a:b] + z[a:b] * np.tan(theta[a:b])))
-        sm_y, sm_z = _smooth(y[a:b], STANCE_WINDOW, period), _smooth(z[a:b], STANCE_WINDOW, period)
+        sm_y, sm_z = smooth(y[a:b], STANCE_WINDOW, period), smooth(z[a:b], STANCE_WINDOW, period)
         if sm_y is not None and sm_z is not None:
             keep = slice(EDGE, b - a - EDGE)
             yy, vy, ay = (v[keep] for v in sm_y)

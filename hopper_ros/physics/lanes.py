@@ -10,10 +10,16 @@ model integrate the same laws their own way.
 State per lane: y, z, y', z', toe depth (compliant ground), applied torque (first-order actuator lag),
 the toe's forward position (it slides on a ground of finite friction).
 Outputs y, z, theta, y', z' every `sample` seconds of the lane's own clock from the apex, the next apex.
+
+Two paths, one result: numba's compilation of the same laws (`physics.compiled`, each lane stepped on its
+own, the default) and numpy's (all lanes stepped together, below), which runs where numba is not
+installed (said once on stderr) or with HOPPER_LANES=numpy.
 """
 
 from __future__ import annotations
 
+import os
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,11 +68,48 @@ def stack(variants: list[laws.Coefficients], lanes_each: int) -> laws.Coefficien
     return laws.Coefficients(**values)
 
 
+_COMPILED = None      # the compiled module once looked up, False where it cannot be used
+
+
+def compiled_backend():
+    """`physics.compiled`, or None (numba missing, or HOPPER_LANES=numpy); the first miss is said on stderr."""
+    global _COMPILED
+    if _COMPILED is None:
+        if os.environ.get("HOPPER_LANES", "").strip().lower() == "numpy":
+            _COMPILED = False
+        else:
+            try:
+                from . import compiled
+                _COMPILED = compiled
+            except ImportError as exc:
+                print(f"hopper_ros: the compiled lanes are not available ({exc}); physics.lanes runs on numpy, "
+                      "about 20 times slower (pip install numba)", file=sys.stderr)
+                _COMPILED = False
+    return _COMPILED or None
+
+
 def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, tau_0, ramp_duration, *,
-                   duration: float, h: float = 5e-4, sample: float = 1e-3) -> LaneResult:
-    """Integrate every lane for `duration` seconds from its apex; `c` holds one coefficient per lane."""
+                   duration: float, h: float = 5e-4, sample: float = 1e-3, compiled: bool | None = None
+                   ) -> LaneResult:
+    """Integrate every lane for `duration` seconds from its apex; `c` holds one coefficient per lane.
+
+    `compiled`: None takes the compiled path where it is available, False the numpy path, True requires
+    the compiled one."""
     n = len(np.atleast_1d(apex_height))
     c = broadcast(c, n)
+    apex_height, forward_speed, theta_td, tau_0, ramp_duration = (
+        np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in (apex_height, forward_speed, theta_td, tau_0,
+                                                                    ramp_duration))
+    steps_per_sample = max(1, int(round(sample / h)))
+    samples = int(np.floor(duration / sample)) + 1
+    backend = compiled_backend() if compiled is not False else None
+    if compiled and backend is None:
+        raise RuntimeError("the compiled lanes are not available (numba missing or HOPPER_LANES=numpy)")
+    if backend is not None:
+        out, apex, events, fell = backend.integrate(c, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h,
+                                                    steps_per_sample, samples)
+        return LaneResult(out[0], out[1], out[2], out[3], out[4], apex[2], apex[3], apex[0], apex[1], events[0],
+                          events[1], fell)
     rho0 = c.rest_length
     compliant = c.ground_stiffness > 0
     lagged = c.torque_lag > 0
@@ -132,8 +175,6 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
         g[asc] = np.where(np.isnan(apex[0]), s[3], np.inf)[asc]
         return g
 
-    steps_per_sample = max(1, int(round(sample / h)))
-    samples = int(np.floor(duration / sample)) + 1
     out = np.empty((5, n, samples), dtype=np.float32)
 
     def record(j):

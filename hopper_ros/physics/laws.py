@@ -15,16 +15,55 @@ coefficients; the mismatch tool's discovered terms set the `*_terms` coefficient
 Sites: flight accelerations; the touchdown velocity reset; the stance force along the leg; the
 torque about the hip in stance; the actuator between the commanded and the applied hip torque;
 the lift-off velocity reset (2.12). Sensors are applied where a recording is compared.
+
+One text, three callers: Python floats, numpy arrays of lanes, and the compiled lanes
+(`hopper_ros.physics.compiled` has numba compile these same functions for one lane's floats, a
+`Coefficients` there being one record of a structured array with the same field names). So a law
+uses numpy's ufuncs (`np.sqrt`, `np.tanh`, ..., which numba compiles for floats) and, where numba
+takes no float, the helpers below (`where`, `clip`, `ones_like`, `nan_to_num`, `is_on`, `nonzero`),
+which the compiled module overloads with their scalar forms; no sets, lambdas or dataclasses in a law.
 """
 
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 SMOOTH_SPEED = 0.005   # [m/s] or [rad/s]: speed below which a dry friction law is smoothed, tanh(v / v_s)
+
+
+# ---------------------------------------------------------------------------- helpers (overloaded when compiled)
+
+
+def where(condition, if_true, if_false):
+    """np.where; a plain bool picks a branch (a float stays a float)."""
+    if type(condition) is bool or type(condition) is np.bool_:
+        return if_true if condition else if_false
+    out = np.where(condition, if_true, if_false)
+    return out[()] if out.ndim == 0 else out
+
+
+def clip(value, low, high):
+    """np.clip; floats stay floats."""
+    if isinstance(value, float) and isinstance(low, float) and isinstance(high, float):
+        return min(max(value, low), high)
+    return np.clip(value, low, high)
+
+
+def ones_like(value):
+    return np.ones_like(value)
+
+
+def nan_to_num(value):
+    return np.nan_to_num(value)
+
+
+def nonzero(coefficient) -> bool:
+    """Whether a coefficient (a float, or an array of lanes) may change a law: arrays always count."""
+    return bool(np.ndim(coefficient)) or coefficient != 0.0
 
 
 def ramp_torque(t_stance, tau_0, ramp_duration):
@@ -33,92 +72,173 @@ def ramp_torque(t_stance, tau_0, ramp_duration):
     Broadcasts over arrays of times (from touchdown), torques and ramp durations; the one ramp
     of the package.
     """
-    if isinstance(t_stance, float) and isinstance(tau_0, float) and isinstance(ramp_duration, float):
-        return -tau_0 * (1.0 - t_stance / ramp_duration) if 0.0 <= t_stance < ramp_duration else 0.0
-    t = np.asarray(t_stance, dtype=float)
-    t_f = np.asarray(ramp_duration, dtype=float)
-    inside = (t >= 0.0) & (t < t_f)
-    value = np.where(inside, -np.asarray(tau_0, dtype=float) * (1.0 - t / np.where(inside, t_f, 1.0)), 0.0)
-    return float(value) if value.ndim == 0 else value
+    inside = (t_stance >= 0.0) & (t_stance < ramp_duration)
+    return where(inside, -tau_0 * (1.0 - t_stance / where(inside, ramp_duration, 1.0)), 0.0)
 
 
 def smooth_sign(v, speed=SMOOTH_SPEED):
     """sign(v), smoothed over |v| < `speed` so that dry friction integrates."""
-    if isinstance(v, float):
-        return math.tanh(v / speed)
-    return np.tanh(np.asarray(v) / speed)
+    return np.tanh(v / speed)
 
 
 # ---------------------------------------------------------------------------- term libraries
-# Each term: (key, words for a researcher, unit of its coefficient, function of the site's context).
-# A site's extra acceleration/force/torque/velocity change is sum_i c_i term_i.
+# Each library: its terms (key, words for a researcher, unit of its coefficient) and one function
+# `value(i, context)` giving term i at a site's context. A site's extra acceleration/force/torque/velocity
+# change is sum_i c_i term_i (`sum_terms`).
 
-FLIGHT_Y_TERMS = (
-    ("1", "a constant horizontal force", "N", lambda c: np.ones_like(c.ydot)),
-    ("ydot", "a horizontal force proportional to the forward speed (viscous drag)", "N s/m", lambda c: c.ydot),
-    ("|ydot|ydot", "a horizontal force quadratic in the forward speed (air drag)", "N s^2/m^2",
-     lambda c: np.abs(c.ydot) * c.ydot),
-    ("sign(ydot)", "a constant horizontal force against the motion (dry friction of the boom's vertical axis)", "N",
-     lambda c: smooth_sign(c.ydot)),
-    ("zdot", "a horizontal force proportional to the vertical speed", "N s/m", lambda c: c.zdot),
-)
-FLIGHT_Z_TERMS = (
-    ("1", "a constant vertical force (upward when positive)", "N", lambda c: np.ones_like(c.zdot)),
-    ("zdot", "a vertical force proportional to the vertical speed (viscous drag)", "N s/m", lambda c: c.zdot),
-    ("|zdot|zdot", "a vertical force quadratic in the vertical speed (air drag)", "N s^2/m^2",
-     lambda c: np.abs(c.zdot) * c.zdot),
-    ("sign(zdot)", "a constant vertical force against the motion (dry friction of the boom's horizontal axis)", "N",
-     lambda c: smooth_sign(c.zdot)),
+TermLibrary = namedtuple("TermLibrary", "terms value")
+
+
+def flight_y_term(i, c):
+    if i == 0:
+        return ones_like(c.ydot)
+    if i == 1:
+        return c.ydot
+    if i == 2:
+        return np.abs(c.ydot) * c.ydot
+    if i == 3:
+        return smooth_sign(c.ydot)
+    return c.zdot
+
+
+def flight_z_term(i, c):
+    if i == 0:
+        return ones_like(c.zdot)
+    if i == 1:
+        return c.zdot
+    if i == 2:
+        return np.abs(c.zdot) * c.zdot
+    if i == 3:
+        return smooth_sign(c.zdot)
+    if i == 4:
+        return np.abs(c.zdot)
+    if i == 5:
+        return c.z
+    if i == 6:
+        return c.ydot
+    return np.maximum(c.z - c.knot, 0.0)
+
+
+def leg_term(i, c):
+    """Along the leg, positive pushing the body away from the toe."""
+    if i == 0:
+        return ones_like(c.rho)
+    if i == 1:
+        return c.compression
+    if i == 2:
+        return c.compression ** 2
+    if i == 3:
+        return c.compression ** 3
+    if i == 4:
+        return -c.rho_dot
+    if i == 5:
+        return -np.abs(c.rho_dot) * c.rho_dot
+    if i == 6:
+        return -np.abs(c.rho_dot)
+    if i == 7:
+        return -smooth_sign(c.rho_dot)
+    if i == 8:
+        return c.since_touchdown
+    if i == 9:
+        return c.torque / c.rho
+    return np.maximum(c.compression - c.knot, 0.0)
+
+
+def hip_term(i, c):
+    """About the hip, positive increasing theta."""
+    if i == 0:
+        return ones_like(c.rho)
+    if i == 1:
+        return c.command
+    if i == 2:
+        return c.theta - c.theta_td
+    if i == 3:
+        return c.theta
+    if i == 4:
+        return -c.theta_dot
+    if i == 5:
+        return -smooth_sign(c.theta_dot)
+    if i == 6:
+        return c.since_touchdown
+    return c.compression
+
+
+def jump_term(i, c):
+    """A velocity change at an event, along or across the leg, from the velocity just before it."""
+    if i == 0:
+        return ones_like(c.along)
+    if i == 1:
+        return c.along
+    return c.across
+
+
+FLIGHT_Y_TERMS = TermLibrary((
+    ("1", "a constant horizontal force", "N"),
+    ("ydot", "a horizontal force proportional to the forward speed (viscous drag)", "N s/m"),
+    ("|ydot|ydot", "a horizontal force quadratic in the forward speed (air drag)", "N s^2/m^2"),
+    ("sign(ydot)", "a constant horizontal force against the motion (dry friction of the boom's vertical axis)", "N"),
+    ("zdot", "a horizontal force proportional to the vertical speed", "N s/m"),
+), flight_y_term)
+FLIGHT_Z_TERMS = TermLibrary((
+    ("1", "a constant vertical force (upward when positive)", "N"),
+    ("zdot", "a vertical force proportional to the vertical speed (viscous drag)", "N s/m"),
+    ("|zdot|zdot", "a vertical force quadratic in the vertical speed (air drag)", "N s^2/m^2"),
+    ("sign(zdot)", "a constant vertical force against the motion (dry friction of the boom's horizontal axis)", "N"),
     ("|zdot|", "a vertical force proportional to the vertical speed's size (with zdot: a drag on the way up or down "
-     "only)", "N s/m", lambda c: np.abs(c.zdot)),
-    ("z", "a vertical force proportional to the height (a spring pulling the boom)", "N/m", lambda c: c.z),
-    ("ydot", "a vertical force proportional to the forward speed", "N s/m", lambda c: c.ydot),
+     "only)", "N s/m"),
+    ("z", "a vertical force proportional to the height (a spring pulling the boom)", "N/m"),
+    ("ydot", "a vertical force proportional to the forward speed", "N s/m"),
     ("z>z_k", "a force proportional to the height above z_k (something that engages above a height: "
-     "a tether or cable going taut, a stop)", "N/m", lambda c: np.maximum(c.z - c.knot, 0.0)),
-)
-LEG_TERMS = (   # along the leg, positive pushing the body away from the toe
-    ("1", "a constant force along the leg", "N", lambda c: np.ones_like(c.rho)),
-    ("x", "a force proportional to the leg's compression (a stiffer spring)", "N/m", lambda c: c.compression),
-    ("x^2", "a force quadratic in the leg's compression (a progressive spring)", "N/m^2", lambda c: c.compression ** 2),
-    ("x^3", "a force cubic in the leg's compression (a hardening spring)", "N/m^3", lambda c: c.compression ** 3),
-    ("rho'", "a force proportional to the leg's extension rate (extra leg damping)", "N s/m", lambda c: -c.rho_dot),
-    ("|rho'|rho'", "a force quadratic in the leg's extension rate", "N s^2/m^2", lambda c: -np.abs(c.rho_dot) * c.rho_dot),
+     "a tether or cable going taut, a stop)", "N/m"),
+), flight_z_term)
+LEG_TERMS = TermLibrary((
+    ("1", "a constant force along the leg", "N"),
+    ("x", "a force proportional to the leg's compression (a stiffer spring)", "N/m"),
+    ("x^2", "a force quadratic in the leg's compression (a progressive spring)", "N/m^2"),
+    ("x^3", "a force cubic in the leg's compression (a hardening spring)", "N/m^3"),
+    ("rho'", "a force proportional to the leg's extension rate (extra leg damping)", "N s/m"),
+    ("|rho'|rho'", "a force quadratic in the leg's extension rate", "N s^2/m^2"),
     ("|rho'|", "a force proportional to the leg's speed in either direction (with rho': damping that differs in "
-     "compression and extension)", "N s/m", lambda c: -np.abs(c.rho_dot)),
-    ("sign(rho')", "a constant force against the leg's sliding (dry friction in the leg)", "N",
-     lambda c: -smooth_sign(c.rho_dot)),
-    ("t", "a force growing with the time since touchdown", "N/s", lambda c: c.since_touchdown),
-    ("tau/rho", "a force along the leg proportional to the hip torque over the leg length", "1", lambda c: c.torque / c.rho),
-    ("x>x_k", "a force proportional to the compression beyond x_k (a stop or a second spring that engages)",
-     "N/m", lambda c: np.maximum(c.compression - c.knot, 0.0)),
-)
+     "compression and extension)", "N s/m"),
+    ("sign(rho')", "a constant force against the leg's sliding (dry friction in the leg)", "N"),
+    ("t", "a force growing with the time since touchdown", "N/s"),
+    ("tau/rho", "a force along the leg proportional to the hip torque over the leg length", "1"),
+    ("x>x_k", "a force proportional to the compression beyond x_k (a stop or a second spring that engages)", "N/m"),
+), leg_term)
 # the term whose break point (knot) is chosen from the data, per library: (term key, Coefficients field of its knot)
 HINGES = {"flight_z": ("z>z_k", "flight_z_knot"), "leg": ("x>x_k", "leg_knot")}
-HIP_TERMS = (   # about the hip, positive increasing theta
-    ("1", "a constant torque at the hip", "N m", lambda c: np.ones_like(c.rho)),
-    ("tau", "a torque proportional to the commanded hip torque (actuator gain)", "1", lambda c: c.command),
+HIP_TERMS = TermLibrary((
+    ("1", "a constant torque at the hip", "N m"),
+    ("tau", "a torque proportional to the commanded hip torque (actuator gain)", "1"),
     ("theta-theta_td", "a torque proportional to the leg's swing since touchdown (a torsional spring at the hip)",
-     "N m/rad", lambda c: c.theta - c.theta_td),
-    ("theta", "a torque proportional to the leg angle (a spring centring the leg)", "N m/rad", lambda c: c.theta),
-    ("theta'", "a torque proportional to the leg's angular rate (viscous friction at the hip)", "N m s/rad",
-     lambda c: -c.theta_dot),
-    ("sign(theta')", "a constant torque against the leg's rotation (dry friction at the hip)", "N m",
-     lambda c: -smooth_sign(c.theta_dot)),
-    ("t", "a torque growing with the time since touchdown", "N m/s", lambda c: c.since_touchdown),
-    ("x", "a torque proportional to the leg's compression", "N", lambda c: c.compression),
-)
-JUMP_TERMS = (  # velocity change at an event, along or across the leg, from the velocity just before it
-    ("1", "a constant velocity change", "m/s", lambda c: np.ones_like(c.along)),
-    ("v_along", "a share of the velocity along the leg", "1", lambda c: c.along),
-    ("v_across", "a share of the velocity across the leg", "1", lambda c: c.across),
-)
+     "N m/rad"),
+    ("theta", "a torque proportional to the leg angle (a spring centring the leg)", "N m/rad"),
+    ("theta'", "a torque proportional to the leg's angular rate (viscous friction at the hip)", "N m s/rad"),
+    ("sign(theta')", "a constant torque against the leg's rotation (dry friction at the hip)", "N m"),
+    ("t", "a torque growing with the time since touchdown", "N m/s"),
+    ("x", "a torque proportional to the leg's compression", "N"),
+), hip_term)
+JUMP_TERMS = TermLibrary((
+    ("1", "a constant velocity change", "m/s"),
+    ("v_along", "a share of the velocity along the leg", "1"),
+    ("v_across", "a share of the velocity across the leg", "1"),
+), jump_term)
 TERM_LIBRARIES = {"flight_y": FLIGHT_Y_TERMS, "flight_z": FLIGHT_Z_TERMS, "leg": LEG_TERMS, "hip": HIP_TERMS,
                   "touchdown_along": JUMP_TERMS, "touchdown_across": JUMP_TERMS,
                   "liftoff_along": JUMP_TERMS, "liftoff_across": JUMP_TERMS}
 
 
+def sum_terms(term, coefficients, context):
+    """sum_i coefficients[i] term(i, context), the terms whose coefficient is zero skipped."""
+    total = 0.0
+    for i in range(len(coefficients)):
+        if nonzero(coefficients[i]):
+            total = total + coefficients[i] * term(i, context)
+    return total
+
+
 def _terms(name: str) -> tuple:
-    return tuple(0.0 for _ in TERM_LIBRARIES[name])
+    return tuple(0.0 for _ in TERM_LIBRARIES[name].terms)
 
 
 # ---------------------------------------------------------------------------- coefficients
@@ -201,17 +321,12 @@ class Coefficients:
         return tuple(f.name for f in fields(Coefficients) if f.name.endswith("_terms"))
 
 
-_OFF = {"torque_gain": 1.0, "torque_limit": math.inf, "ground_friction": math.inf}
-
-
 def active(c: Coefficients) -> frozenset:
     """Names of the extra coefficients that are on in any lane (cached on the instance: the laws test it often)."""
     cached = c.__dict__.get("_active")
     if cached is None:
         on = set()
-        for name in ("quadratic_drag", "flight_friction_y", "flight_friction_z", "spring_cubic", "spring_preload",
-                     "quadratic_damping",
-                     "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness"):
+        for name in GATED:
             if np.any(np.asarray(getattr(c, name)) != 0.0):
                 on.add(name)
         if np.any(np.isfinite(np.asarray(c.ground_friction))):
@@ -224,56 +339,51 @@ def active(c: Coefficients) -> frozenset:
     return cached
 
 
-def _sum_terms(library, coefficients, context):
-    total = 0.0
-    for (_, _, _, term), c in zip(library, coefficients):
-        if np.ndim(c) or c != 0.0:
-            total = total + np.asarray(c) * term(context)
-    return total
+# the coefficients whose law is skipped where they are 0 (`is_on`); ground_friction is on where finite, and a
+# `*_terms` field where any of its coefficients is not 0
+GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "spring_cubic", "spring_preload",
+         "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness")
+
+
+def is_on(c: Coefficients, name: str) -> bool:
+    """Whether the law of coefficient `name` acts in any lane of `c` (compiled: in this lane)."""
+    return name in active(c)
 
 
 # ---------------------------------------------------------------------------- flight
 
-
-class FlightContext:
-    __slots__ = ("y", "z", "ydot", "zdot", "knot")
-
-    def __init__(self, y, z, ydot, zdot, knot=0.0):
-        self.y, self.z, self.ydot, self.zdot, self.knot = y, z, ydot, zdot, knot
+FlightContext = namedtuple("FlightContext", "y z ydot zdot knot")
 
 
 def flight_acceleration(c: Coefficients, y, z, ydot, zdot):
     """Body acceleration in flight (y'', z''): (2.8) y'' = -d_h y', z'' = -g - d_v z', plus the flight effects."""
     ay = -c.flight_damping_y * ydot
     az = -c.gravity - c.flight_damping_z * zdot
-    on = active(c)
-    if "quadratic_drag" in on:
+    if is_on(c, "quadratic_drag"):
         speed = np.sqrt(ydot * ydot + zdot * zdot)
         ay = ay - c.quadratic_drag * speed * ydot
         az = az - c.quadratic_drag * speed * zdot
-    if "flight_friction_y" in on:
+    if is_on(c, "flight_friction_y"):
         ay = ay - c.flight_friction_y * smooth_sign(ydot)
-    if "flight_friction_z" in on:
+    if is_on(c, "flight_friction_z"):
         az = az - c.flight_friction_z * smooth_sign(zdot)
-    if "flight_y_terms" in on or "flight_z_terms" in on:
-        ctx = FlightContext(y, z, ydot, zdot, c.flight_z_knot)
-        ay = ay + _sum_terms(FLIGHT_Y_TERMS, c.flight_y_terms, ctx) / c.mass
-        az = az + _sum_terms(FLIGHT_Z_TERMS, c.flight_z_terms, ctx) / c.mass
+    if is_on(c, "flight_y_terms") or is_on(c, "flight_z_terms"):
+        context = FlightContext(y, z, ydot, zdot, c.flight_z_knot)
+        ay = ay + sum_terms(flight_y_term, c.flight_y_terms, context) / c.mass
+        az = az + sum_terms(flight_z_term, c.flight_z_terms, context) / c.mass
     return ay, az
 
 
 # ---------------------------------------------------------------------------- stance
 
+StanceContext = namedtuple("StanceContext", "rho rho_dot compression theta theta_dot theta_td since_touchdown torque "
+                                            "command knot")
 
-class StanceContext:
-    __slots__ = ("rho", "rho_dot", "compression", "theta", "theta_dot", "theta_td", "since_touchdown",
-                 "torque", "command", "knot")
 
-    def __init__(self, rho, rho_dot, rest_length, theta, theta_dot, theta_td, since_touchdown, torque, command,
-                 knot=0.0):
-        self.rho, self.rho_dot, self.compression = rho, rho_dot, rest_length - rho
-        self.theta, self.theta_dot, self.theta_td = theta, theta_dot, theta_td
-        self.since_touchdown, self.torque, self.command, self.knot = since_touchdown, torque, command, knot
+def stance_context(rho, rho_dot, rest_length, theta, theta_dot, theta_td, since_touchdown, torque, command, knot):
+    """The quantities a stance term may depend on (`leg_term`, `hip_term`); compression = rho_0 - rho."""
+    return StanceContext(rho, rho_dot, rest_length - rho, theta, theta_dot, theta_td, since_touchdown, torque,
+                         command, knot)
 
 
 def leg_force(c: Coefficients, rho, rho_dot):
@@ -281,14 +391,13 @@ def leg_force(c: Coefficients, rho, rho_dot):
     along-the-leg effects other than the discovered terms (cubic spring, preload, quadratic damping, dry friction)."""
     x = c.rest_length - rho
     force = c.stiffness * x - c.damping * rho_dot
-    on = active(c)
-    if "spring_cubic" in on:
+    if is_on(c, "spring_cubic"):
         force = force + c.spring_cubic * x ** 3
-    if "spring_preload" in on:
+    if is_on(c, "spring_preload"):
         force = force + c.spring_preload
-    if "quadratic_damping" in on:
+    if is_on(c, "quadratic_damping"):
         force = force - c.quadratic_damping * np.abs(rho_dot) * rho_dot
-    if "leg_friction" in on:
+    if is_on(c, "leg_friction"):
         force = force - c.leg_friction * smooth_sign(rho_dot)
     return force
 
@@ -296,33 +405,23 @@ def leg_force(c: Coefficients, rho, rho_dot):
 def hip_losses(c: Coefficients, theta_dot):
     """Friction in the hip joint, -b theta' - f tanh(theta'/w_s), added to the applied torque."""
     loss = 0.0
-    on = active(c)
-    if "hip_viscous" in on:
+    if is_on(c, "hip_viscous"):
         loss = loss - c.hip_viscous * theta_dot
-    if "hip_friction" in on:
+    if is_on(c, "hip_friction"):
         loss = loss - c.hip_friction * smooth_sign(theta_dot)
     return loss
 
 
-def has_terms(c: Coefficients, name: str) -> bool:
-    return name in active(c)
+StanceForces = namedtuple("StanceForces", [
+    "sin", "cos", "rho", "rho_dot",
+    "force",         # along the leg [N]
+    "torque",        # about the hip [N m], the applied torque plus hip losses and terms
+    "depth_rate",    # toe sinking rate into a compliant ground [m/s]
+    "toe_rate",      # the toe's forward sliding speed on a ground of finite friction [m/s]
+    "ydd", "zdd"])
 
 
-@dataclass
-class StanceForces:
-    sin: object
-    cos: object
-    rho: object
-    rho_dot: object
-    force: object        # along the leg [N]
-    torque: object       # about the hip [N m], the applied torque plus hip losses and terms
-    depth_rate: object   # toe sinking rate into a compliant ground [m/s]
-    toe_rate: object     # the toe's forward sliding speed on a ground of finite friction [m/s]
-    ydd: object
-    zdd: object
-
-
-def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, *, command=0.0, theta_td=0.0,
+def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, command=0.0, theta_td=0.0,
                   since_touchdown=0.0, compliant=None) -> StanceForces:
     """Stance dynamics (2.9) in Cartesian form about the toe at (toe_y, ground_height - depth).
 
@@ -334,37 +433,34 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, *, co
     the discovered hip terms, r the horizontal mass ratio of the boom. A compliant ground holds the
     massless toe with k_g depth + d_g depth' = the force's vertical component; depth' enters rho'. On a
     ground of finite friction the toe slides (`toe_slip_rate`); its speed enters rho' the same way.
+    `compliant` (per lane) defaults to ground_stiffness > 0.
     """
     dy = y - toe_y
     hz = z - c.ground_height + depth
-    scalar = isinstance(dy, float) and isinstance(hz, float)
-    rho = math.sqrt(dy * dy + hz * hz) if scalar else np.sqrt(dy * dy + hz * hz)
+    rho = np.sqrt(dy * dy + hz * hz)
     sin, cos = -dy / rho, hz / rho
     approach = -sin * ydot + cos * zdot                     # rho' with the toe at rest
-    theta = math.atan2(-dy, hz) if scalar else np.arctan2(-dy, hz)
+    theta = np.arctan2(-dy, hz)
     theta_dot = (-ydot * hz + dy * zdot) / (rho * rho)
     tau = torque + hip_losses(c, theta_dot)
-    extra_leg = has_terms(c, "leg_terms")
-    if has_terms(c, "hip_terms"):
-        ctx = StanceContext(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown, torque, command)
-        tau = tau + _sum_terms(HIP_TERMS, c.hip_terms, ctx)
+    if is_on(c, "hip_terms"):
+        hip_context = stance_context(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown,
+                                     torque, command, 0.0)
+        tau = tau + sum_terms(hip_term, c.hip_terms, hip_context)
     spring_only = leg_force(c, rho, approach) + c.damping * approach     # the force's parts without d rho'
-    if extra_leg:
-        ctx = StanceContext(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown, tau, command,
-                            c.leg_knot)
-        spring_only = spring_only + _sum_terms(LEG_TERMS, c.leg_terms, ctx)
+    if is_on(c, "leg_terms"):
+        leg_context = stance_context(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown,
+                                     tau, command, c.leg_knot)
+        spring_only = spring_only + sum_terms(leg_term, c.leg_terms, leg_context)
     depth_rate = 0.0
-    on = active(c)
-    if compliant is None:
-        compliant = np.asarray(c.ground_stiffness) > 0.0
-    if "ground_stiffness" in on:
+    if is_on(c, "ground_stiffness"):
         push = (spring_only - c.damping * approach) * cos - tau / rho * sin
         rate = (push - c.ground_stiffness * depth) / (c.ground_damping + c.damping * cos * cos)
-        depth_rate = (rate if compliant else 0.0) if scalar else np.where(compliant, rate, 0.0)
+        depth_rate = where(c.ground_stiffness > 0.0 if compliant is None else compliant, rate, 0.0)
     rho_dot = approach + cos * depth_rate
     across = tau / rho
     toe_rate = 0.0
-    if "ground_friction" in on:
+    if is_on(c, "ground_friction"):
         toe_rate = toe_slip_rate(c, spring_only - c.damping * rho_dot, across, sin, cos)
         rho_dot = rho_dot + sin * toe_rate
     force = spring_only - c.damping * rho_dot
@@ -384,18 +480,18 @@ def toe_slip_rate(c: Coefficients, stuck_force, across, sin, cos):
     the direction s = -sign(G_y) with G_y = -s mu G_z, which fixes the leg force at
     F* = (tau/rho)(cos + s mu sin)/(s mu cos - sin), and the leg damper sets the speed that gives it:
     F = stuck_force - d sin v_toe (rho' = rho'_stuck + sin v_toe). Static and kinetic friction are one mu.
+    (A zero denominator gives nan, not a division by zero: the toe then sticks.)
     """
     mu = c.ground_friction
     g_y = -stuck_force * sin - across * cos
     g_z = stuck_force * cos - across * sin
     s = -np.sign(g_y)
     denominator = s * mu * cos - sin
-    with np.errstate(divide="ignore", invalid="ignore"):
-        boundary = across * (cos + s * mu * sin) / np.where(denominator == 0.0, np.nan, denominator)
-        speed = (stuck_force - boundary) / (c.damping * sin)
+    boundary = across * (cos + s * mu * sin) / where(denominator == 0.0, np.nan, denominator)
+    resistance = c.damping * sin
+    speed = (stuck_force - boundary) / where(resistance == 0.0, np.nan, resistance)
     sliding = (np.abs(g_y) > mu * np.maximum(g_z, 0.0)) & (g_z > 0.0) & (s * speed > 0.0) & np.isfinite(speed)
-    rate = np.where(sliding, np.clip(np.nan_to_num(speed), -MAX_SLIP_SPEED, MAX_SLIP_SPEED), 0.0)
-    return float(rate) if np.ndim(rate) == 0 else rate
+    return where(sliding, clip(nan_to_num(speed), -MAX_SLIP_SPEED, MAX_SLIP_SPEED), 0.0)
 
 
 # ---------------------------------------------------------------------------- the actuator
@@ -406,20 +502,12 @@ def actuator_torque(c: Coefficients, command):
 
     The delay and the first-order lag act in time (the integrators: `torque_delay`, `torque_lag`).
     """
-    tau = c.torque_gain * command + c.torque_offset
-    if isinstance(tau, float) and isinstance(c.torque_limit, float):
-        return min(max(tau, -c.torque_limit), c.torque_limit)
-    return np.clip(tau, -c.torque_limit, c.torque_limit)
+    return clip(c.torque_gain * command + c.torque_offset, -c.torque_limit, c.torque_limit)
 
 
 # ---------------------------------------------------------------------------- events
 
-
-class JumpContext:
-    __slots__ = ("along", "across")
-
-    def __init__(self, along, across):
-        self.along, self.across = along, across
+JumpContext = namedtuple("JumpContext", "along across")
 
 
 def _leg_components(theta, ydot, zdot):
@@ -437,25 +525,25 @@ def touchdown_velocity(c: Coefficients, theta, ydot, zdot):
     """Body velocity just after touchdown at leg angle theta: the rigid model keeps it; the touchdown
     effects remove shares along and across the leg and add the discovered jump terms."""
     sin, cos, along, across = _leg_components(theta, ydot, zdot)
-    ctx = JumpContext(along, across)
+    context = JumpContext(along, across)
     new_along = along * (1.0 - c.touchdown_loss_along)
     new_across = across * (1.0 - c.touchdown_loss_across)
-    if has_terms(c, "touchdown_along_terms"):
-        new_along = new_along + _sum_terms(JUMP_TERMS, c.touchdown_along_terms, ctx)
-    if has_terms(c, "touchdown_across_terms"):
-        new_across = new_across + _sum_terms(JUMP_TERMS, c.touchdown_across_terms, ctx)
+    if is_on(c, "touchdown_along_terms"):
+        new_along = new_along + sum_terms(jump_term, c.touchdown_along_terms, context)
+    if is_on(c, "touchdown_across_terms"):
+        new_across = new_across + sum_terms(jump_term, c.touchdown_across_terms, context)
     return _from_components(sin, cos, new_along, new_across)
 
 
 def liftoff_velocity(c: Coefficients, theta, ydot, zdot):
     """Body velocity after the lift-off collision (2.12), v -> m_b/(m_b + m_t) v, plus the discovered jump terms."""
     ydot, zdot = c.collision_factor * ydot, c.collision_factor * zdot
-    if not (has_terms(c, "liftoff_along_terms") or has_terms(c, "liftoff_across_terms")):
+    if not (is_on(c, "liftoff_along_terms") or is_on(c, "liftoff_across_terms")):
         return ydot, zdot
     sin, cos, along, across = _leg_components(theta, ydot, zdot)
-    ctx = JumpContext(along, across)
-    along = along + _sum_terms(JUMP_TERMS, c.liftoff_along_terms, ctx)
-    across = across + _sum_terms(JUMP_TERMS, c.liftoff_across_terms, ctx)
+    context = JumpContext(along, across)
+    along = along + sum_terms(jump_term, c.liftoff_along_terms, context)
+    across = across + sum_terms(jump_term, c.liftoff_across_terms, context)
     return _from_components(sin, cos, along, across)
 
 
