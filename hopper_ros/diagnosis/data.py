@@ -109,6 +109,9 @@ class StrideData:
     touchdown_lead: float = 0.0  # [s] median: stance began this long before the model's leg met the ground
     stance_start: np.ndarray = field(default_factory=lambda: np.zeros(0))   # [s] per stride: the held leg turns
     ringing: dict = field(default_factory=dict)   # channel -> its ringing after lift-off (`ringing`), found once
+    # variant key -> (SSE, next apex) per stride, simulated once (`simulate.simulate_variants`); not passed on by
+    # dataclasses.replace: a subset of the strides has its own
+    simulated: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def liftoffs(self) -> np.ndarray:

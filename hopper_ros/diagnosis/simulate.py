@@ -3,6 +3,12 @@
 A variant is the model's coefficients (`physics.laws.Coefficients`, effects included) plus sensor
 faults (delay, scale, offset per channel, a discovered ringing after lift-off: `ringing`). All (variant, stride) pairs run as lanes of one
 vectorised integration (`physics.lanes`), from the recorded apex with the recorded inputs.
+
+A search asks for the same variant more than once (a candidate at its "off" value is the model it
+searches on; a fine grid shares its ends with the coarse one): each variant's per-stride SSE and
+next apex are kept on the `StrideData` (`StrideData.simulated`) and simulated once. Where the lanes
+run compiled, so does the SSE (`diagnosis.compiled`); the numpy reference here also gives the
+per-phase sums and the residual series (`keep_series`).
 """
 
 from __future__ import annotations
@@ -19,6 +25,8 @@ from .data import PHASES, StrideData
 
 CHANNELS = ("y", "z", "theta")
 BATCH_LANES = 4000      # lanes per integration call (memory: 5 x lanes x samples float32)
+KEPT_VARIANTS = 20000   # variants whose results a StrideData keeps (about 2 kB each for 50 strides)
+FIELDS = laws.Coefficients.scalar_names() + laws.Coefficients.term_names()
 
 
 @dataclass
@@ -31,17 +39,47 @@ class Variant:
         return Variant(c, {**self.sensors, **(sensors or {})})
 
 
+def variant_key(variant: Variant) -> tuple:
+    """What a variant's simulation depends on: every coefficient and sensor value."""
+    c = variant.coefficients
+    return tuple(getattr(c, name) for name in FIELDS) + tuple(sorted(variant.sensors.items()))
+
+
 def simulate_variants(data: StrideData, variants: list[Variant], keep_series: bool = False) -> dict:
-    """Per (variant, stride): normalised SSE (y, z all samples, theta in stance), per-phase sums and
-    next-apex predictions; with `keep_series` the residual series and the raw lanes."""
+    """Per (variant, stride): normalised SSE (y, z all samples, theta in stance) and next-apex predictions
+    ("sse", "pred"); with `keep_series` also the per-phase sums ("by_phase", "counts"), the residual series
+    and the raw lanes, always simulated anew."""
+    if keep_series:
+        return _batched(data, variants, True)
+    if not variants:
+        return {"sse": np.zeros((0, len(data.strides))), "pred": {}}
+    kept = data.simulated
+    keys = [variant_key(v) for v in variants]
+    new = {}
+    for key, variant in zip(keys, variants):
+        if key not in kept and key not in new:
+            new[key] = variant
+    if new:
+        sim = _batched(data, list(new.values()), False)
+        for row, key in enumerate(new):
+            kept[key] = (sim["sse"][row], {k: v[row] for k, v in sim["pred"].items()})
+        while len(kept) > KEPT_VARIANTS:
+            del kept[next(iter(kept))]
+    rows = [kept[key] for key in keys]
+    return {"sse": np.array([r[0] for r in rows]), "pred": {k: np.array([r[1][k] for r in rows]) for k in rows[0][1]}}
+
+
+def _batched(data: StrideData, variants: list[Variant], keep_series: bool) -> dict:
     ns = len(data.strides)
     per_call = max(1, BATCH_LANES // ns)
     parts = [_simulate(data, variants[i:i + per_call], keep_series) for i in range(0, len(variants), per_call)]
     if len(parts) == 1:
         return parts[0]
-    out = {"sse": np.vstack([p["sse"] for p in parts]), "by_phase": np.vstack([p["by_phase"] for p in parts]),
-           "counts": parts[0]["counts"], "series": [], "raw": None,
+    out = {"sse": np.vstack([p["sse"] for p in parts]),
            "pred": {k: np.vstack([p["pred"][k] for p in parts]) for k in parts[0]["pred"]}}
+    if keep_series:
+        out.update({"by_phase": np.vstack([p["by_phase"] for p in parts]), "counts": parts[0]["counts"],
+                    "series": [x for p in parts for x in p["series"]], "raw": None})
     return out
 
 
@@ -54,8 +92,35 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
                   for p in ringing.KEYS} for ch in ringing.CHANNEL_SITE}
     z0 = (np.tile(s.apex_height, nv) - sens["z_offset"]) / sens["z_scale"]
     theta_td = (np.tile(s.touchdown_angle, nv) - sens["theta_offset"]) / sens["theta_scale"]
+    duration = data.duration + 0.02
+    needed = None if keep_series else _needed_samples(data, sens, nv, int(np.floor(duration / 1e-3)) + 1)
     res = lanes.simulate_lanes(coef, z0, np.tile(s.forward_speed, nv) / sens["y_scale"], theta_td,
-                               np.tile(s.tau_0, nv), np.tile(s.ramp_duration, nv), duration=data.duration + 0.02)
+                               np.tile(s.tau_0, nv), np.tile(s.ramp_duration, nv), duration=duration, needed=needed)
+    shape = (nv, ns)
+    pred = {"height": res.next_apex_height.reshape(shape) * sens["z_scale"].reshape(shape) + sens["z_offset"].reshape(shape),
+            "speed": res.next_forward_speed.reshape(shape) * sens["y_scale"].reshape(shape),
+            "time": res.stride_time.reshape(shape),
+            "length": res.stride_length.reshape(shape) * sens["y_scale"].reshape(shape)}
+    if not keep_series and lanes.compiled_backend() is not None:
+        from .compiled import trajectory_sse
+        return {"sse": trajectory_sse(res, data, sens, rings, nv), "pred": pred}
+    return {**_residuals(data, res, sens, rings, nv, keep_series), "pred": pred}
+
+
+def _needed_samples(data: StrideData, sens: dict, nv: int, samples: int) -> np.ndarray:
+    """Per lane, the lane samples its recorded stride reads: up to the one after the last recorded sample's
+    time on the lane's clock, the latest of its channels (their delays shift it)."""
+    s, rec = data.strides, data.rec
+    end = np.tile(rec.t[s.stop - 1] - s.apex_time, nv)
+    earliest = np.minimum(np.minimum(sens["y_delay"], sens["z_delay"]), sens["theta_delay"])
+    pos = np.clip((end + sens["z_delay"] - earliest) / 1e-3, 0, samples - 1.001)
+    return np.floor(pos).astype(int) + 2
+
+
+def _residuals(data: StrideData, res, sens: dict, rings: dict, nv: int, keep_series: bool) -> dict:
+    """The reference: per (variant, stride) the normalised SSE, per phase and channel; the series."""
+    s, rec = data.strides, data.rec
+    ns = len(s)
     nsamp = res.y.shape[1]
     sse = np.zeros((nv, ns))
     by_phase = np.zeros((nv, ns, len(PHASES), 3))
@@ -99,10 +164,4 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
                 counts[i, pi, ci] = msk.sum() if ch != "theta" else (msk & stance).sum()
         if keep_series:
             series.append({ch: resid[ch] * data.sigma[ch] for ch in resid})
-    shape = (nv, ns)
-    pred = {"height": res.next_apex_height.reshape(shape) * sens["z_scale"].reshape(shape) + sens["z_offset"].reshape(shape),
-            "speed": res.next_forward_speed.reshape(shape) * sens["y_scale"].reshape(shape),
-            "time": res.stride_time.reshape(shape),
-            "length": res.stride_length.reshape(shape) * sens["y_scale"].reshape(shape)}
-    return {"sse": sse, "by_phase": by_phase, "counts": counts, "pred": pred, "series": series,
-            "raw": res if keep_series else None}
+    return {"sse": sse, "by_phase": by_phase, "counts": counts, "series": series, "raw": res if keep_series else None}

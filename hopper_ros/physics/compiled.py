@@ -8,7 +8,8 @@ array whose fields are the dataclass's (`record_dtype`), so `c.stiffness` reads 
 `integrate` steps every lane on its own, exactly as `physics.lanes` steps them together (RK4 at h, the
 guard's sign change located by linear interpolation and the step split there, collapse and tipping
 checks after each step), so the two paths agree to rounding. A lane that has fallen keeps its state,
-and its remaining samples are copied instead of integrated.
+and its remaining samples are copied instead of integrated; a lane given a number of `needed` samples
+stops once it has them and has found its next apex (or fallen), its later samples nan.
 
 Compiled code is cached on disk (`cache_directory`), in a folder named by a hash of the sources it is
 compiled from (numba alone would check only this file's time stamp, not the laws').
@@ -204,7 +205,7 @@ def _record(c, s, mode, theta_hold, out, lane, j):
 
 @numba.njit(cache=True, error_model="numpy")
 def _lane(c, lane, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h, steps_per_sample, samples,
-          out, apex, events, fell):
+          needed, out, apex, events, fell):
     s = (0.0, apex_height, forward_speed, 0.0, 0.0, 0.0, np.nan)
     theta_hold = theta_at_td = theta_td
     t_f = max(ramp_duration, 1e-6)
@@ -219,6 +220,9 @@ def _lane(c, lane, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h
     k, g = _evaluate(c, t, s, mode, apex_found, ground_clearance, t_td, tau_0, t_f, theta_at_td, lagged, lag, compliant)
     _record(c, s, mode, theta_hold, out, lane, 0)
     for j in range(1, samples):
+        if j >= needed and (apex_found or mode == DEAD):     # nothing more is read
+            out[:, lane, j:] = np.nan
+            break
         if mode == DEAD:             # the state holds: its samples repeat
             for q in range(5):
                 out[q, lane, j] = out[q, lane, j - 1]
@@ -278,16 +282,17 @@ def _lane(c, lane, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h
 
 
 @numba.njit(cache=True, error_model="numpy", parallel=True)
-def _lanes(c, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h, steps_per_sample, samples,
+def _lanes(c, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h, steps_per_sample, samples, needed,
            out, apex, events, fell):
     for lane in numba.prange(c.shape[0]):
         _lane(c[lane], lane, apex_height[lane], forward_speed[lane], theta_td[lane], tau_0[lane],
-              ramp_duration[lane], h, steps_per_sample, samples, out, apex, events, fell)
+              ramp_duration[lane], h, steps_per_sample, samples, needed[lane], out, apex, events, fell)
 
 
 def integrate(c: laws.Coefficients, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h: float,
-              steps_per_sample: int, samples: int):
-    """Every lane from its apex for `samples` samples of `steps_per_sample` RK4 steps of `h`.
+              steps_per_sample: int, samples: int, needed=None):
+    """Every lane from its apex for `samples` samples of `steps_per_sample` RK4 steps of `h` (`needed`: per lane,
+    the samples read; later ones are nan once the lane has found its next apex).
 
     Returns (out (5, lanes, samples) float32: y, z, theta, y', z'; apex (4, lanes): t, y, z, y' of the next
     apex; events (2, lanes): touchdown and lift-off times; fell (lanes,) bool).
@@ -300,5 +305,6 @@ def integrate(c: laws.Coefficients, apex_height, forward_speed, theta_td, tau_0,
     fell = np.zeros(n, dtype=np.bool_)
     columns = [np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=np.float64), (n,)))
                for x in (apex_height, forward_speed, theta_td, tau_0, ramp_duration)]
-    _lanes(lanes, *columns, float(h), int(steps_per_sample), int(samples), out, apex, events, fell)
+    needed = np.full(n, samples, dtype=np.int64) if needed is None else np.asarray(needed, dtype=np.int64)
+    _lanes(lanes, *columns, float(h), int(steps_per_sample), int(samples), needed, out, apex, events, fell)
     return out, apex, events, fell

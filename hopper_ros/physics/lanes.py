@@ -89,12 +89,13 @@ def compiled_backend():
 
 
 def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, tau_0, ramp_duration, *,
-                   duration: float, h: float = 5e-4, sample: float = 1e-3, compiled: bool | None = None
-                   ) -> LaneResult:
+                   duration: float, h: float = 5e-4, sample: float = 1e-3, compiled: bool | None = None,
+                   needed=None) -> LaneResult:
     """Integrate every lane for `duration` seconds from its apex; `c` holds one coefficient per lane.
 
     `compiled`: None takes the compiled path where it is available, False the numpy path, True requires
-    the compiled one."""
+    the compiled one. `needed` (per lane, optional): the samples the caller reads; the compiled path stops a
+    lane that has them and has found its next apex, its later samples nan."""
     n = len(np.atleast_1d(apex_height))
     c = broadcast(c, n)
     apex_height, forward_speed, theta_td, tau_0, ramp_duration = (
@@ -107,7 +108,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
         raise RuntimeError("the compiled lanes are not available (numba missing or HOPPER_LANES=numpy)")
     if backend is not None:
         out, apex, events, fell = backend.integrate(c, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h,
-                                                    steps_per_sample, samples)
+                                                    steps_per_sample, samples, needed)
         return LaneResult(out[0], out[1], out[2], out[3], out[4], apex[2], apex[3], apex[0], apex[1], events[0],
                           events[1], fell)
     rho0 = c.rest_length
