@@ -14,7 +14,7 @@ setup:
 	@bash tools/setup.sh
 
 test: setup
-	$(VENV_PYTHON) -m pytest -q -p no:cacheprovider test
+	$(VENV_PYTHON) -m pytest -q -p no:cacheprovider --durations=25 test
 
 # BENCH_ARGS, e.g. BENCH_ARGS=--quick or BENCH_ARGS="--only messages"
 bench: setup

@@ -71,9 +71,10 @@ def _expected(effect: dict):
     return name, convert(float(effect["magnitude"]))
 
 
-def score(result: dict, truth: dict, threshold: float) -> dict:
-    """Hits, misses, false positives and location hits of one diagnosis against its truth sidecar."""
-    verdicts = list(result["chosen"])
+def score(result, truth: dict, threshold: float) -> dict:
+    """Hits, misses, false positives and location hits of one diagnosis (`records.Diagnosis`) against its truth
+    sidecar."""
+    verdicts = list(result.chosen)
     used = set()
     hits, misses, located = [], [], []
     for effect in truth["effects"]:
@@ -81,29 +82,29 @@ def score(result: dict, truth: dict, threshold: float) -> dict:
         right_sites = set(effect["located_sites"]) if "located_sites" in effect else SITES.get(effect["site"], set())
         found = None
         for k, r in enumerate(verdicts):
-            c = r["candidate"]
-            names = {c.name, *(t["name"] for t in r.get("ties", []))}
+            c = r.candidate
+            names = {c.name, *(t.name for t in r.ties)}
             if name is not None and name in names:
-                mag = r["magnitude"] if c.name == name else next(t["magnitude"] for t in r["ties"] if t["name"] == name)
+                mag = r.magnitude if c.name == name else next(t.magnitude for t in r.ties if t.name == name)
                 if abs(mag - magnitude) <= TOLERANCE * abs(magnitude):
                     found = (k, f"{name} {mag:.4g} (true {magnitude:.4g})")
                     break
             if name is None:   # an effect no entry models: terms discovered where it acts (or among the look-alikes)
-                options = [r] + list(r.get("ties", []))
-                hit = next((o for o in options if o["candidate"].kind == "discovered"
-                            and o["candidate"].site in right_sites), None)
+                options = [r] + list(r.ties)
+                hit = next((o for o in options if o.candidate.kind == "discovered"
+                            and o.candidate.site in right_sites), None)
                 if hit is not None:
-                    found = (k, f"{hit['candidate'].name}: {hit['candidate'].describe(hit['value'])}")
+                    found = (k, f"{hit.name}: {hit.candidate.describe(hit.value)}")
                     break
         if found:
             used.add(found[0])
             hits.append((effect["id"], found[1]))
         else:
             misses.append((effect["id"], name, magnitude))
-        above = {loc.site for loc in result["location"] if loc.ratio >= threshold}
+        above = {loc.site for loc in result.location if loc.ratio >= threshold}
         if effect["site"].startswith("sensor") or above & right_sites:
             located.append(effect["id"])
-    false = [r["name"] for k, r in enumerate(verdicts) if k not in used]
+    false = [r.name for k, r in enumerate(verdicts) if k not in used]
     return {"hits": hits, "misses": misses, "false_positives": false, "located": located,
             "effects": len(truth["effects"]), "clean": not truth["effects"],
             "physics_only": not any(e["site"].startswith("sensor") for e in truth["effects"])}
@@ -112,13 +113,14 @@ def score(result: dict, truth: dict, threshold: float) -> dict:
 def diagnose_and_score(name: str, recording, truth: dict, verbose: bool = True) -> dict:
     """One recording diagnosed and scored: the row of a summary."""
     from hopper_ros.diagnosis import diagnose_file
-    from hopper_ros.diagnosis.core import Settings, location_line
+    from hopper_ros.diagnosis.report import location_line
+    from hopper_ros.diagnosis.settings import Settings
 
     threshold = Settings().locate_threshold
     result = diagnose_file(recording)
     s = score(result, truth, threshold)
-    s.update(name=name, seconds=result["wall_time"], verdict=result["verdict"], before=result["before"],
-             after=result["after"], location=location_line(result["location"], threshold))
+    s.update(name=name, seconds=result.wall_time, verdict=result.verdict, before=result.before.as_dict(),
+             after=result.after.as_dict(), location=location_line(result.location, threshold))
     if verbose:
         print(f"{name}: {len(s['hits'])}/{s['effects']} named, false {s['false_positives']}, located "
               f"{len(s['located'])}, {s['seconds']:.0f} s | {s['verdict']} | {s['location']}", flush=True)

@@ -45,25 +45,25 @@ MATCH = {
 }
 
 
-def score(result: dict, truth: dict) -> dict:
+def score(result, truth: dict) -> dict:
     """Hits (with how: magnitude within 20 %, look-alike or discovered), misses and false positives."""
     used, hits, misses = set(), [], []
     for effect in truth["effects"]:
         names, sites = MATCH.get(effect["id"], ({}, set()))
         found = None
-        for k, r in enumerate(result["chosen"]):
-            for option in [r] + list(r.get("ties", [])):
-                c = option["candidate"]
+        for k, r in enumerate(result.chosen):
+            for option in [r] + list(r.ties):
+                c = option.candidate
                 if c.name in names:
                     convert = names[c.name]
                     if convert is None:
-                        found = (k, f"{c.name} {option['magnitude']:.4g} (look-alike)")
+                        found = (k, f"{c.name} {option.magnitude:.4g} (look-alike)")
                     else:
                         want = convert(float(effect["magnitude"]))
-                        if abs(option["magnitude"] - want) <= 0.2 * abs(want):
-                            found = (k, f"{c.name} {option['magnitude']:.4g} (true {want:.4g})")
+                        if abs(option.magnitude - want) <= 0.2 * abs(want):
+                            found = (k, f"{c.name} {option.magnitude:.4g} (true {want:.4g})")
                 elif c.kind == "discovered" and c.site in sites:
-                    found = (k, f"{c.name}: {c.describe(option['value'])}")
+                    found = (k, f"{c.name}: {c.describe(option.value)}")
                 if found:
                     break
             if found:
@@ -73,7 +73,7 @@ def score(result: dict, truth: dict) -> dict:
             hits.append((effect["id"], found[1]))
         else:
             misses.append((effect["id"], effect["magnitude"]))
-    false = [r["name"] for k, r in enumerate(result["chosen"]) if k not in used]
+    false = [r.name for k, r in enumerate(result.chosen) if k not in used]
     return {"hits": hits, "misses": misses, "false_positives": false, "located": [], "effects": len(truth["effects"]),
             "clean": not truth["effects"], "physics_only": not any(e["site"].startswith("sensor")
                                                                     for e in truth["effects"])}
@@ -91,8 +91,8 @@ def run(folder: Path, names=None, verbose: bool = True) -> dict:
         truth = json.loads(truth_path.read_text())
         result = diagnose_file(truth_path.with_suffix(".csv"))
         s = score(result, truth)
-        s.update(name=truth_path.stem, seconds=result["wall_time"], verdict=result["verdict"],
-                 before=result["before"], after=result["after"])
+        s.update(name=truth_path.stem, seconds=result.wall_time, verdict=result.verdict,
+                 before=result.before.as_dict(), after=result.after.as_dict())
         if verbose:
             print(f"{s['name']}: {len(s['hits'])}/{s['effects']} {s['hits']} missed {s['misses']} false "
                   f"{s['false_positives']}, {s['seconds']:.0f} s | {s['verdict']}", flush=True)

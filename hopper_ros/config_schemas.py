@@ -12,7 +12,7 @@ units, unknown keys refused). No ROS import.
 | identification.yaml | IDENTIFICATION (with `effects:`, library names checked against `fitted`, and `lanes:`) | identify, report |
 | setpoints/*.yaml | SCHEDULE | setpoint_scheduler |
 
-diagnosis.yaml (read by hopper_ros.diagnosis.core.load_settings, which checks it itself) and the
+diagnosis.yaml (read by hopper_ros.diagnosis.settings.load_settings, which checks it itself) and the
 launch files are not covered yet: `load_config(name, SCHEMA)` is the way to adopt them.
 """
 

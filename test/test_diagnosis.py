@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from hopper_ros.diagnosis import DiagnosisError, diagnose_file
-from hopper_ros.diagnosis.core import Settings, location_line
+from hopper_ros.diagnosis.report import location_line
+from hopper_ros.diagnosis.settings import Settings
 from hopper_ros.recording.recordings import Recording, write_csv
 from hopper_ros.physics import effects as library
 
@@ -44,36 +45,36 @@ def results(tmp_path_factory):
 @pytest.mark.parametrize("name", SUBSET)
 def test_named_with_magnitude_and_nothing_else(results, name):
     _, truth, result, s, _ = results[name]
-    assert not s["misses"], f"{name}: missed {s['misses']}; verdict {result['verdict']}"
-    assert not s["false_positives"], f"{name}: {result['verdict']}"
-    for r in result["chosen"]:
-        assert r["candidate"].kind != "sensor", f"a sensor fault named on a physics-only recording: {r['name']}"
+    assert not s["misses"], f"{name}: missed {s['misses']}; verdict {result.verdict}"
+    assert not s["false_positives"], f"{name}: {result.verdict}"
+    for r in result.chosen:
+        assert r.candidate.kind != "sensor", f"a sensor fault named on a physics-only recording: {r.name}"
 
 
 @pytest.mark.parametrize("name", [n for n in SUBSET if n != "clean_a"])
 def test_located_where_it_acts_and_fit_improves(results, name):
     _, truth, result, s, _ = results[name]
-    assert len(s["located"]) == len(truth["effects"]), [loc.words() for loc in result["location"][:3]]
+    assert len(s["located"]) == len(truth["effects"]), [loc.words() for loc in result.location[:3]]
     for key in ("E_p", "E_v", "E_t"):
-        assert result["after"][key] <= result["before"][key] * 1.01 + 1e-6
-    assert result["after"]["E_p"] < result["before"]["E_p"]
+        assert getattr(result.after, key) <= getattr(result.before, key) * 1.01 + 1e-6
+    assert result.after.E_p < result.before.E_p
 
 
 def test_small_touchdown_loss_located_by_fit(results):
     """The force residual at touchdown is within the noise; the re-simulations of the naming locate it."""
     result = results["touchdown_loss_across"][2]
-    at = [loc for loc in result["location"] if loc.site == "touchdown_across"
+    at = [loc for loc in result.location if loc.site == "touchdown_across"
           and loc.ratio >= Settings().locate_threshold]
     assert at and at[0].basis == "fit" and at[0].window == "touchdown_loss_across", [
-        loc.words() for loc in result["location"][:4]]
-    assert "(by fit: touchdown_loss_across removes" in location_line(result["location"], Settings().locate_threshold)
+        loc.words() for loc in result.location[:4]]
+    assert "(by fit: touchdown_loss_across removes" in location_line(result.location, Settings().locate_threshold)
 
 
 def test_clean_recording_nothing_located_report_written(results):
     _, _, result, _, _ = results["clean_a"]
-    assert result["verdict"] == "no significant mismatch"
-    assert all(loc.ratio < Settings().locate_threshold for loc in result["location"])
-    report = result["report"]
+    assert result.verdict == "no significant mismatch"
+    assert all(loc.ratio < Settings().locate_threshold for loc in result.location)
+    report = result.report
     assert report.is_file() and (report.parent / "diagnosis.png").is_file()
     assert "no significant mismatch" in report.read_text()
 
@@ -127,22 +128,25 @@ def test_the_researchers_loop_with_files_alone(results, tmp_path):
     """diagnose names the effect -> identify fits it into a model file -> diagnose with that model finds nothing
     and the held-out next apex is predicted better than with the plain model."""
     _, _, first, _, csv = results["quadratic_drag"]
-    name = first["chosen"][0]["name"]
+    name = first.chosen[0].name
     proc = subprocess.run([sys.executable, "-m", "hopper_ros.cli", "identify", str(csv), "--effects", name,
                            "--folds", "3", "-o", str(tmp_path / "id")], capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     model = tmp_path / "id" / "identified_model.yaml"
     assert name in model.read_text()
     again = diagnose_file(csv, model=str(model))
-    assert again["model_effects"] and name in again["model_effects"]
-    assert not any(r["name"] == name for r in again["chosen"]), again["verdict"]
-    assert again["before"]["E_p"] < first["before"]["E_p"]
+    assert again.model_effects and name in again.model_effects
+    assert not any(r.name == name for r in again.chosen), again.verdict
+    assert again.before.E_p < first.before.E_p
 
 
 def test_a_secondary_parameter_is_held_and_said():
     """The ground's damping is a secondary parameter of its compliance: a candidate holding it builds models
     with that damping at every magnitude, and its words and the verdict say the value."""
-    from hopper_ros.diagnosis.core import base_variant, library_candidate, verdict
+    from hopper_ros.diagnosis.candidates import library_candidate
+    from hopper_ros.diagnosis.core import base_variant
+    from hopper_ros.diagnosis.records import Errors, Fit, Scored
+    from hopper_ros.diagnosis.report import verdict
     from hopper_ros.physics.params import load_params
 
     base = base_variant(load_params())
@@ -155,5 +159,5 @@ def test_a_secondary_parameter_is_held_and_said():
         assert built.ground_damping == 150.0 and built.ground_stiffness == pytest.approx(1.0 / value)
     assert candidate.build(base, 1e-5).coefficients.ground_damping == base.coefficients.ground_damping
     assert "d_g = 150 N s/m" in held.describe(1e-5)
-    line = verdict([{"candidate": held, "magnitude": 4e4, "value": 2.5e-5}])
+    line = verdict([Scored(held, Fit(2.5e-5, [], [], [], np.zeros(0)), 4e4, np.ones(1), Errors(0.0, 0.0, 0.0, 0))])
     assert line == "missing: ground_compliance = 4e+04 N/m (d_g 150 N s/m)", line

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from hopper_ros.diagnosis import diagnose_file
-from hopper_ros.diagnosis.core import Settings
+from hopper_ros.diagnosis.settings import Settings
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
 from diagnosis_suite import _expected, score  # noqa: E402
@@ -37,15 +37,15 @@ def suite(tmp_path_factory):
 @pytest.mark.parametrize("name", SUBSET)
 def test_every_concealed_effect_named_and_nothing_else(suite, name):
     truth, result, s, _ = suite[name]
-    assert not s["misses"], f"{name}: missed {s['misses']}; verdict: {result['verdict']}"
-    assert not s["false_positives"], f"{name}: named what is not there {s['false_positives']}; {result['verdict']}"
+    assert not s["misses"], f"{name}: missed {s['misses']}; verdict: {result.verdict}"
+    assert not s["false_positives"], f"{name}: named what is not there {s['false_positives']}; {result.verdict}"
 
 
 @pytest.mark.parametrize("name", SUBSET)
 def test_held_out_apex_never_worse(suite, name):
     _, result, _, _ = suite[name]
     for key in ("E_p", "E_v", "E_t"):
-        assert result["after"][key] <= result["before"][key] * 1.01 + 1e-6, (key, result["before"], result["after"])
+        assert getattr(result.after, key) <= getattr(result.before, key) * 1.01 + 1e-6, (key, result.before, result.after)
 
 
 def test_located_where_the_effects_act(suite):
@@ -54,9 +54,9 @@ def test_located_where_the_effects_act(suite):
     for name in SUBSET:
         truth, result, s, _ = suite[name]
         if truth["effects"]:
-            assert s["located"], f"{name}: not located ({[l.words() for l in result['location'][:3]]})"
+            assert s["located"], f"{name}: not located ({[l.words() for l in result.location[:3]]})"
         else:
-            assert all(loc.ratio < Settings().locate_threshold for loc in result["location"]), name
+            assert all(loc.ratio < Settings().locate_threshold for loc in result.location), name
 
 
 def test_json_verdict(suite):
@@ -82,18 +82,18 @@ def test_stance_start_from_the_held_leg(suite):
     times the ramp from there, says so, and names the ground's height."""
     _, higher, _, _ = suite["other_ground_higher"]
     _, clean, _, _ = suite["clean_1"]
-    assert 0.003 < higher["data"].touchdown_lead < 0.005, higher["data"].touchdown_lead
-    assert abs(clean["data"].touchdown_lead) < 0.001, clean["data"].touchdown_lead
-    assert higher["chosen"][0]["name"] in ("ground_height", "z_offset"), higher["verdict"]
+    assert 0.003 < higher.data.touchdown_lead < 0.005, higher.data.touchdown_lead
+    assert abs(clean.data.touchdown_lead) < 0.001, clean.data.touchdown_lead
+    assert higher.chosen[0].name in ("ground_height", "z_offset"), higher.verdict
 
 
 def test_pair_both_named_with_the_first_refitted(suite):
     """A torque gain of 0.85 and quadratic drag together: fitted alone, the gain (0.80) stands in for the drag
     too; refitted beside the drag it returns to 0.85 and both are named within 20 %."""
     truth, result, s, _ = suite["pair_drag_gain"]
-    assert len(s["hits"]) == 2, result["verdict"]
-    gain = next(r for r in result["chosen"] if r["name"] == "torque_gain")
-    assert abs(gain["magnitude"] - 0.85) < 0.02, gain["magnitude"]
+    assert len(s["hits"]) == 2, result.verdict
+    gain = next(r for r in result.chosen if r.name == "torque_gain")
+    assert abs(gain.magnitude - 0.85) < 0.02, gain.magnitude
 
 
 def test_restart_when_the_first_choice_stands_in_for_a_pair(suite):
@@ -101,9 +101,9 @@ def test_restart_when_the_first_choice_stands_in_for_a_pair(suite):
     makes the next apex's timing worse), and nothing on top of the gain explains the rest. The residual left
     starts the rounds again from the runners-up, and the pair is named."""
     truth, result, s, _ = suite["pair_toemass_delay"]
-    greedy = max((r for r in result["rounds"][0] if r["significant"]), key=lambda r: r["reduction"])
-    assert greedy["name"] not in {_expected(e)[0] for e in truth["effects"]}, greedy["name"]
-    assert len(s["hits"]) == 2 and not s["false_positives"], result["verdict"]
+    greedy = max((r for r in result.rounds[0] if r.significant), key=lambda r: r.reduction)
+    assert greedy.name not in {_expected(e)[0] for e in truth["effects"]}, greedy.name
+    assert len(s["hits"]) == 2 and not s["false_positives"], result.verdict
 
 
 def test_restart_from_a_sensor_fault_when_the_rounds_fill_up(suite):
@@ -113,10 +113,10 @@ def test_restart_from_a_sensor_fault_when_the_rounds_fill_up(suite):
     theta offset fits the held-out strides better as a whole (it trades a little E_p for E_v and E_t) and
     replaces it: both named within 20 %, nothing else."""
     truth, result, s, _ = suite["pair_stiffness_thetaoffset"]
-    greedy = max((r for r in result["rounds"][0] if r["significant"]), key=lambda r: r["reduction"])
-    assert greedy["name"] not in {_expected(e)[0] for e in truth["effects"]}, greedy["name"]
-    assert len(s["hits"]) == 2 and not s["false_positives"], result["verdict"]
-    assert [r["candidate"].kind for r in result["chosen"]].count("sensor") == 1, result["verdict"]
+    greedy = max((r for r in result.rounds[0] if r.significant), key=lambda r: r.reduction)
+    assert greedy.name not in {_expected(e)[0] for e in truth["effects"]}, greedy.name
+    assert len(s["hits"]) == 2 and not s["false_positives"], result.verdict
+    assert [r.candidate.kind for r in result.chosen].count("sensor") == 1, result.verdict
 
 
 def test_terms_that_fit_better_than_the_library_replace_its_look_alike_and_patch(suite):
@@ -125,11 +125,11 @@ def test_terms_that_fit_better_than_the_library_replace_its_look_alike_and_patch
     leaves. The discovered term alone fits the held-out strides better than that pair, so the rounds restarted
     from it replace both: the plant's own law, with its stiffness, and nothing else."""
     truth, result, s, _ = suite["other_hip_torsion_spring"]
-    greedy = max((r for r in result["rounds"][0] if r["significant"]), key=lambda r: r["reduction"])
-    assert greedy["candidate"].kind != "discovered", greedy["name"]
-    assert [r["candidate"].kind for r in result["chosen"]] == ["discovered"], result["verdict"]
-    entry = result["chosen"][0]
-    terms = {key: coef * entry["value"] for key, coef, _, _ in entry["candidate"].discovery.terms()}
+    greedy = max((r for r in result.rounds[0] if r.significant), key=lambda r: r.reduction)
+    assert greedy.candidate.kind != "discovered", greedy.name
+    assert [r.candidate.kind for r in result.chosen] == ["discovered"], result.verdict
+    entry = result.chosen[0]
+    terms = {key: coef * entry.value for key, coef, _, _ in entry.candidate.discovery.terms()}
     kappa = truth["effects"][0]["magnitude"]
     assert set(terms) == {"theta"} and abs(-terms["theta"] - kappa) <= 0.2 * kappa, terms
 
@@ -143,15 +143,15 @@ def test_a_force_that_engages_above_a_height_is_found_with_its_knot(suite):
     t over strides is weak (most strides never reach z_c). Discovery chooses the hinge's knot by
     cross-validation and the refitted term names both the height and the stiffness."""
     truth, result, s, _ = suite["other_tether"]
-    entry = result["chosen"][0]
-    found = entry["candidate"].discovery
-    assert found is not None and found.site == "flight_vertical", result["verdict"]
-    terms = {key: coef * entry["value"] for key, coef, _, _ in found.terms()}
+    entry = result.chosen[0]
+    found = entry.candidate.discovery
+    assert found is not None and found.site == "flight_vertical", result.verdict
+    terms = {key: coef * entry.value for key, coef, _, _ in found.terms()}
     assert set(terms) == {"z>z_k"}, terms
     stiffness = _effect(truth)["kappa"] * truth["model"]["m_b"]
     assert abs(-terms["z>z_k"] - stiffness) <= 0.2 * stiffness, (terms, stiffness)
     assert abs(found.knot - _effect(truth)["z_c"]) <= 0.01, found.knot
-    assert f"z_k = {found.knot:.3g} m" in result["verdict"]
+    assert f"z_k = {found.knot:.3g} m" in result.verdict
 
 
 def test_a_ringing_channel_is_modelled_as_what_the_sensor_sees(suite):
@@ -159,24 +159,26 @@ def test_a_ringing_channel_is_modelled_as_what_the_sensor_sees(suite):
     decaying oscillation after lift-off, its frequency, decay and amplitude as the plant has them, and written
     in the JSON as a discovered entry with its terms in SI units."""
     truth, result, s, folder = suite["other_boom_bending"]
-    assert [r["name"] for r in result["chosen"]] == ["discovered_z_ringing"], result["verdict"]
-    found = result["chosen"][0]["candidate"].discovery
+    assert [r.name for r in result.chosen] == ["discovered_z_ringing"], result.verdict
+    found = result.chosen[0].candidate.discovery
     plant = _effect(truth)
     assert abs(found.frequency - plant["freq_hz"]) <= 0.05 * plant["freq_hz"], found.frequency
     decay = plant["zeta"] * 2 * 3.141592653589793 * plant["freq_hz"]
     assert abs(found.decay - decay) <= 0.3 * decay, (found.decay, decay)
-    amplitude = found.amplitude * result["chosen"][0]["value"]
+    amplitude = found.amplitude * result.chosen[0].value
     assert abs(amplitude - plant["amplitude"]) <= 0.2 * plant["amplitude"], amplitude
     doc = json.loads((folder / "other_boom_bending.verdict.json").read_text())
     entry = doc["verdict"][0]
     assert entry["kind"] == "discovered" and [t["unit"] for t in entry["terms"]] == ["m", "m"], entry
-    assert "rings" in entry["words"] and result["after"]["E_p"] <= result["before"]["E_p"] * 1.01
+    assert "rings" in entry["words"] and result.after.E_p <= result.before.E_p * 1.01
 
 
 @pytest.fixture(scope="module")
 def residuals(tmp_path_factory):
     """The located residuals of two recordings whose law no library entry has, under the model."""
-    from hopper_ros.diagnosis.core import base_variant, load_settings, prepare
+    from hopper_ros.diagnosis.core import base_variant
+    from hopper_ros.diagnosis.data import prepare
+    from hopper_ros.diagnosis.settings import load_settings
     from hopper_ros.diagnosis.locate import residual_sets
     from hopper_ros.recording.recordings import load_recording
     from hopper_ros.physics.params import load_model
@@ -243,5 +245,5 @@ def test_a_mismatch_no_force_shows_is_located_by_trajectory(suite):
                                 settings.trajectory_threshold, PHASES, CHANNELS)
     assert first is not None and first.basis == "trajectory" and first.site in ("stance_hip", "stance_along")
     assert "compression" in first.window, first.words()
-    named = next(r for r in result["chosen"] if r["name"] == "toe_slip")
-    assert abs(named["magnitude"] - 0.40) <= 0.2 * 0.40 and len(s["hits"]) == 1, result["verdict"]
+    named = next(r for r in result.chosen if r.name == "toe_slip")
+    assert abs(named.magnitude - 0.40) <= 0.2 * 0.40 and len(s["hits"]) == 1, result.verdict

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from hopper_ros.diagnosis import simulate
-from hopper_ros.diagnosis.core import Settings, base_variant
+from hopper_ros.diagnosis.core import base_variant
+from hopper_ros.diagnosis.settings import Settings
 from hopper_ros.diagnosis.data import prepare
 from hopper_ros.diagnosis.ringing import key
 from hopper_ros.physics import lanes

@@ -34,7 +34,7 @@ def recordings(tmp_path_factory):
 
 def test_clean_recording_of_another_plant_is_clean(recordings):
     result = diagnose_file(recordings / "clean.csv")
-    assert result["verdict"] == "no significant mismatch", result["verdict"]
+    assert result.verdict == "no significant mismatch", result.verdict
 
 
 def test_a_drag_on_the_way_down_only_is_discovered_and_said(recordings):
@@ -44,12 +44,12 @@ def test_a_drag_on_the_way_down_only_is_discovered_and_said(recordings):
     truth = json.loads((recordings / "s02_boom_descent_drag.json").read_text())
     result = diagnose_file(recordings / "s02_boom_descent_drag.csv")
     s = score(result, truth)
-    assert len(s["hits"]) == 1 and not s["false_positives"], result["verdict"]
-    found = result["chosen"][0]
-    assert found["candidate"].kind == "discovered" and "while descending" in result["verdict"], result["verdict"]
-    terms = {key: coef * found["value"] for key, coef, _, _ in found["candidate"].discovery.terms()}
+    assert len(s["hits"]) == 1 and not s["false_positives"], result.verdict
+    found = result.chosen[0]
+    assert found.candidate.kind == "discovered" and "while descending" in result.verdict, result.verdict
+    terms = {key: coef * found.value for key, coef, _, _ in found.candidate.discovery.terms()}
     mass, b = 2.20, truth["effects"][0]["magnitude"]
     descending, rising = (terms["zdot"] - terms["|zdot|"]) / mass, (terms["zdot"] + terms["|zdot|"]) / mass
     assert abs(-descending - b) <= 0.2 * b and abs(rising) <= 0.2 * b, terms
     for key in ("E_p", "E_v", "E_t"):
-        assert result["after"][key] <= result["before"][key] * 1.01 + 1e-6
+        assert getattr(result.after, key) <= getattr(result.before, key) * 1.01 + 1e-6

@@ -14,6 +14,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--settings", default="diagnosis.yaml", help="candidates and statistics (config/ name or path)")
     parser.add_argument("-o", "--output", default=None, metavar="DIR", help="write diagnosis.md and diagnosis.png here")
     parser.add_argument("--json", default=None, metavar="FILE", help="write the verdict and the location as JSON")
+    parser.add_argument("-q", "--quiet", action="store_true",
+                        help="no progress on stderr (it is shown only on a terminal anyway)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -24,6 +26,7 @@ def main(args: argparse.Namespace) -> int:
 
 def _main(args: argparse.Namespace) -> int:
     from hopper_ros.diagnosis import DiagnosisError, diagnose_file
+    from hopper_ros.diagnosis.progress import Progress
     from hopper_ros.recording.recordings import RecordingError
 
     from hopper_ros.config_schemas import load_model
@@ -31,22 +34,23 @@ def _main(args: argparse.Namespace) -> int:
 
     try:
         load_model(args.model)                          # its schema first: one line naming file and key
-        result = diagnose_file(args.recording, args.model, args.output, args.settings, args.json)
+        progress = Progress(enabled=False if args.quiet else None)
+        result = diagnose_file(args.recording, args.model, args.output, args.settings, args.json, progress)
     except (DiagnosisError, RecordingError, ValueError, FileNotFoundError, KeyError) as exc:
         print(f"hopper diagnose: error: {exc}", file=sys.stderr)
         return 1 if isinstance(exc, ConfigError) else 2
-    from hopper_ros.diagnosis.core import location_line, timing_line
+    from hopper_ros.diagnosis.report import location_line, timing_line
 
-    print(f"{len(result['data'].strides)} strides, {result['wall_time']:.1f} s")
-    print(location_line(result["location"], result["settings"].locate_threshold))
-    if timing_line(result["data"]):
-        print(timing_line(result["data"]))
-    print(result["verdict"])
-    b, a = result["before"], result["after"]
-    print(f"held-out E_p {b['E_p']:.3f} -> {a['E_p']:.3f} %, E_v {b['E_v']:.3f} -> {a['E_v']:.3f} %, "
-          f"E_t {b['E_t']:.3f} -> {a['E_t']:.3f} %")
+    print(f"{len(result.data.strides)} strides, {result.wall_time:.1f} s")
+    print(location_line(result.location, result.settings.locate_threshold))
+    if timing_line(result.data):
+        print(timing_line(result.data))
+    print(result.verdict)
+    b, a = result.before, result.after
+    print(f"held-out E_p {b.E_p:.3f} -> {a.E_p:.3f} %, E_v {b.E_v:.3f} -> {a.E_v:.3f} %, "
+          f"E_t {b.E_t:.3f} -> {a.E_t:.3f} %")
     if args.output:
-        print(f"report: {result['report']}")
+        print(f"report: {result.report}")
     if args.json:
-        print(f"json: {result['json']}")
+        print(f"json: {result.json}")
     return 0

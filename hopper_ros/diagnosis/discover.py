@@ -21,18 +21,8 @@ import numpy as np
 
 from hopper_ros.physics import laws
 
-from .locate import SITE_WORDS
+from .sites import REGISTRY, hinge_of
 
-SITE_LIBRARY = {   # site -> (term library, Coefficients field, context kind)
-    "flight_horizontal": (laws.FLIGHT_Y_TERMS, "flight_y_terms", "flight"),
-    "flight_vertical": (laws.FLIGHT_Z_TERMS, "flight_z_terms", "flight"),
-    "stance_along": (laws.LEG_TERMS, "leg_terms", "stance"),
-    "stance_hip": (laws.HIP_TERMS, "hip_terms", "stance"),
-    "touchdown_along": (laws.JUMP_TERMS, "touchdown_along_terms", "jump"),
-    "touchdown_across": (laws.JUMP_TERMS, "touchdown_across_terms", "jump"),
-    "liftoff_along": (laws.JUMP_TERMS, "liftoff_along_terms", "jump"),
-    "liftoff_across": (laws.JUMP_TERMS, "liftoff_across_terms", "jump"),
-}
 KNOT_QUANTILES = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95)   # where a hinge term's knot may sit, over the samples
 FOLDS = 5
 MIN_T = 1.5          # held-out improvement over strides, one-sided t: a pre-screen (an effect only some strides
@@ -50,7 +40,7 @@ class Discovery:
     knot: float = 0.0         # [m] where the site's hinge term (if any) engages
 
     def terms(self) -> list[tuple[str, float, str, str]]:
-        library = SITE_LIBRARY[self.site][0]
+        library = REGISTRY[self.site].terms
         hinge = hinge_of(self.field)
         out = []
         for (key, words, unit), c in zip(library.terms, self.coefficients):
@@ -62,7 +52,7 @@ class Discovery:
         return out
 
     def words(self, scale: float = 1.0) -> str:
-        phase, direction = SITE_WORDS[self.site]
+        phase, direction = REGISTRY[self.site].phase, REGISTRY[self.site].direction
         terms = {key: (c, w, u) for key, c, w, u in self.terms()}
         parts = []
         for (odd, even), say in DIRECTIONAL.items():
@@ -86,11 +76,6 @@ DIRECTIONAL = {
 }
 
 
-def hinge_of(field: str):
-    """(term key, knot field) of the hinge term in the library of Coefficients field `field`, or None."""
-    return laws.HINGES.get(field[:-len("_terms")])
-
-
 def _context(kind: str, ctx: dict, knot: float = 0.0):
     if kind == "flight":
         return laws.FlightContext(ctx["y"], ctx["z"], ctx["ydot"], ctx["zdot"], knot)
@@ -102,9 +87,9 @@ def _context(kind: str, ctx: dict, knot: float = 0.0):
 
 def _knots(site: str, sets) -> tuple:
     """Candidate knots of the site's hinge term: quantiles of its variable over the recorded samples."""
-    if hinge_of(SITE_LIBRARY[site][1]) is None:
+    if hinge_of(REGISTRY[site].field) is None:
         return (0.0,)
-    kind = SITE_LIBRARY[site][2]
+    kind = REGISTRY[site].context
     values = [ctx["z"] if kind == "flight" else ctx["rest_length"] - ctx["rho"]
               for r in sets[0] if r is not None and site in r.samples for ctx in [r.samples[site][1]]]
     if not values:
@@ -114,7 +99,7 @@ def _knots(site: str, sets) -> tuple:
 
 def site_samples(site: str, sets, knot: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per stride (design matrix, bias-corrected residual) of one site."""
-    library, _, kind = SITE_LIBRARY[site]
+    library, kind = REGISTRY[site].terms, REGISTRY[site].context
     rec, clean, _ = sets
     out = []
     for r, c0 in zip(rec, clean):
@@ -189,7 +174,7 @@ def _cross_validate(per_stride, max_terms: int):
 
 def discover_site(site: str, sets, max_terms: int = 3) -> Discovery | None:
     """The term set (and hinge knot) of `site` that held-out strides prefer, or None."""
-    library, field, _ = SITE_LIBRARY[site]
+    library, field = REGISTRY[site].terms, REGISTRY[site].field
     hinge = hinge_of(field)
     hinge_column = [k for k, *_ in library.terms].index(hinge[0]) if hinge else -1
     trials = []

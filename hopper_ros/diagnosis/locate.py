@@ -23,8 +23,9 @@ import numpy as np
 from hopper_ros.physics import lanes, laws
 
 from .data import LEAD_RESOLVED, StrideData
-from .ringing import CHANNEL_SITE, ringing, since_liftoff
+from .ringing import ringing, since_liftoff
 from .simulate import Variant
+from .sites import CHANNEL_SITE, REGISTRY, RESIDUAL_SITES, TRAJECTORY_SITES
 from .smoothing import smooth
 
 FLIGHT_WINDOW = 71     # samples of the Savitzky-Golay fit in flight
@@ -33,22 +34,6 @@ EDGE = 3               # samples dropped next to an event
 JUMP_SKIP = 2          # samples skipped next to an event for the velocity fits
 JUMP_FLIGHT = 30       # samples of the flight side's quadratic fit
 JUMP_STANCE = 14       # samples of the stance side's cubic fit
-SITES = ("flight_horizontal", "flight_vertical", "stance_along", "stance_hip", "touchdown_along",
-         "touchdown_across", "liftoff_along", "liftoff_across")
-SITE_WORDS = {"flight_horizontal": ("flight", "horizontal"), "flight_vertical": ("flight", "vertical"),
-              "stance_along": ("stance", "along the leg"), "stance_hip": ("stance", "about the hip"),
-              "touchdown_along": ("touchdown", "along the leg"), "touchdown_across": ("touchdown", "across the leg"),
-              "liftoff_along": ("lift-off", "along the leg"), "liftoff_across": ("lift-off", "across the leg"),
-              "touchdown_timing": ("touchdown", "in time")}
-BINS = {"flight_horizontal": ("descent", "ascent"), "flight_vertical": ("descent", "ascent"),
-        "stance_along": ("early stance", "mid stance", "late stance"),
-        "stance_hip": ("early stance", "mid stance", "late stance"),
-        "touchdown_along": ("at touchdown",), "touchdown_across": ("at touchdown",),
-        "liftoff_along": ("at lift-off",), "liftoff_across": ("at lift-off",)}
-UNITS = {"flight_horizontal": "N", "flight_vertical": "N", "stance_along": "N", "stance_hip": "N m",
-         "touchdown_along": "m/s", "touchdown_across": "m/s", "liftoff_along": "m/s", "liftoff_across": "m/s"}
-
-
 @dataclass
 class StrideResiduals:
     """One stride's residuals per site: samples (values and their context) and per-bin means."""
@@ -276,11 +261,11 @@ class Location:
 
     @property
     def phase(self) -> str:
-        return SITE_WORDS[self.site][0]
+        return REGISTRY[self.site].phase
 
     @property
     def direction(self) -> str:
-        return SITE_WORDS[self.site][1]
+        return REGISTRY[self.site].direction
 
     def words(self) -> str:
         if self.basis == "trajectory":
@@ -293,28 +278,21 @@ class Location:
                 f"({self.ratio:.1f} x the noise level)")
 
 
-def fit_locations(results: list[dict], sites, threshold: float, min_t: float) -> list[Location]:
+def fit_locations(results: list, sites, threshold: float, min_t: float) -> list[Location]:
     """Locate by fit: per site, the best change acting there among `results` (the accepted changes of the model,
-    each fitted on training strides and judged on held-out ones against the model without it). Re-simulations
+    each fitted on training strides and judged on held-out ones against the model without it: `records.Scored`). Re-simulations
     say where a correction of the model removes the residual when the force residuals, one stride at a time,
     are too weak to stand above the noise (a 6 % touchdown loss across the leg, a dry friction). `sites` maps a
     candidate to its located sites; the ratio is t scaled so that t = `min_t` is `threshold`."""
     best = {}
     for r in results:
-        for site in sites(r["candidate"]):
-            if site not in best or r["t"] > best[site]["t"]:
+        for site in sites(r.candidate):
+            if site not in best or r.t > best[site].t:
                 best[site] = r
-    return [Location(site, r["t"] * threshold / min_t, r["candidate"].name, 100.0 * r["reduction"], "%",
-                     len(r["held_sse"]), basis="fit", t=r["t"]) for site, r in best.items()]
+    return [Location(site, r.t * threshold / min_t, r.name, 100.0 * r.reduction, "%", len(r.held_sse), basis="fit",
+                     t=r.t) for site, r in best.items()]
 
 
-# (phase, channel) of the re-simulated strides -> the site it belongs to, and the channel in words
-TRAJECTORY_SITES = {("descent", "y"): "flight_horizontal", ("descent", "z"): "flight_vertical",
-                    ("compression", "y"): "stance_along", ("compression", "z"): "stance_along",
-                    ("compression", "theta"): "stance_hip", ("decompression", "y"): "stance_along",
-                    ("decompression", "z"): "stance_along", ("decompression", "theta"): "stance_hip",
-                    ("liftoff", "y"): "liftoff_along", ("liftoff", "z"): "liftoff_along",
-                    ("ascent", "y"): "flight_horizontal", ("ascent", "z"): "flight_vertical"}
 CHANNEL_WORDS = {"y": "the forward position", "z": "the height", "theta": "the leg angle"}
 
 
@@ -341,7 +319,7 @@ def locate(data: StrideData, variant: Variant) -> tuple[list[Location], tuple]:
     """Every site with its residual over the noise level, largest first; and the residual sets for discovery."""
     rec, clean, noisy = sets = residual_sets(data, variant)
     found = []
-    for site in SITES:
+    for site in RESIDUAL_SITES:
         R, B, N = [], [], []
         for r, c0, n1 in zip(rec, clean, noisy):
             if r is None or c0 is None or n1 is None:
@@ -366,8 +344,9 @@ def locate(data: StrideData, variant: Variant) -> tuple[list[Location], tuple]:
         k = int(np.nanargmax(np.abs(means) / np.maximum(null_sd, 1e-12)))
         t_bias = float(abs(means[k]) / max(null_sd[k], 1e-12)) / 3.0
         ratio = max(rms / max(noise_rms, 1e-12), t_bias)
-        found.append(Location(site, ratio, BINS[site][k] if k < len(BINS[site]) else "", float(means[k]),
-                              UNITS[site], int(ok.any(axis=1).sum())))
+        bins = REGISTRY[site].bins
+        found.append(Location(site, ratio, bins[k] if k < len(bins) else "", float(means[k]), REGISTRY[site].unit,
+                              int(ok.any(axis=1).sum())))
     timing = timing_location(data, variant)
     if timing is not None:
         found.append(timing)

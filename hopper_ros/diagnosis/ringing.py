@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .sites import CHANNEL_SITE
+
 FREQUENCIES = np.geomspace(4.0, 80.0, 64)      # [Hz] scanned (those with MIN_CYCLES in the median window)
 DECAY_RATES = (2.0, 5.0, 10.0, 20.0, 40.0)     # [1/s] scanned, then both refined about the best
 MIN_CYCLES = 2.0         # an oscillation slower than this many periods per window is a trend, not ringing
@@ -30,7 +32,6 @@ GUARD = 0.002            # [s] skipped after the detected lift-off (its timing i
 FOLDS = 5
 MIN_T = 3.0
 MIN_AMPLITUDE = 1.0      # x the channel's noise level: a smaller oscillation cannot matter to the fit
-CHANNEL_SITE = {"z": "flight_vertical", "y": "flight_horizontal"}
 CHANNEL_WORDS = {"z": "height", "y": "forward position"}
 KEYS = ("sin", "cos", "hz", "decay")
 

@@ -22,6 +22,7 @@ from hopper_ros.physics.effects import SENSOR_OFF
 
 from . import ringing
 from .data import PHASES, StrideData
+from .sites import CHANNEL_SITE
 
 CHANNELS = ("y", "z", "theta")
 BATCH_LANES = 4000      # lanes per integration call (memory: 5 x lanes x samples float32)
@@ -89,7 +90,7 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
     coef = lanes.stack([v.coefficients for v in variants], ns)
     sens = {k: np.repeat(np.array([v.sensors.get(k, SENSOR_OFF[k]) for v in variants]), ns) for k in SENSOR_OFF}
     rings = {ch: {ringing.key(ch, p): np.array([v.sensors.get(ringing.key(ch, p), 0.0) for v in variants])[:, None]
-                  for p in ringing.KEYS} for ch in ringing.CHANNEL_SITE}
+                  for p in ringing.KEYS} for ch in CHANNEL_SITE}
     z0 = (np.tile(s.apex_height, nv) - sens["z_offset"]) / sens["z_scale"]
     theta_td = (np.tile(s.touchdown_angle, nv) - sens["theta_offset"]) / sens["theta_scale"]
     duration = data.duration + 0.02

@@ -1,0 +1,230 @@
+"""The search on one recording: candidates gridded, fitted per fold and scored on held-out strides.
+
+A `Search` holds what every step of it shares (the prepared recording, the base variant, the settings,
+the folds, the progress). Candidates are searched on top of a `Stack` (the base and the effects accepted
+so far, refitted with every new candidate: backfitting, `fitting.Backfit`), first on a coarse grid, then
+on a fine one about the best value; the best are scored again from strides simulated at their fold
+magnitudes (no interpolation). `screen` keeps the candidates worth that, from a subset of the strides.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import acceptance
+from .candidates import Candidate, search_grid
+from .data import StrideData
+from .fitting import Backfit, interp_pred, partner_points, quadratic_at, vertex
+from .progress import QUIET, Progress
+from .records import Errors, Fit, Reference, Scored
+from .settings import Settings
+from .simulate import Variant, simulate_variants
+from .sites import first_sites
+
+
+@dataclass
+class Stack:
+    """The model a round searches on top of: the base variant and the effects accepted so far, whose
+    magnitudes are refitted with every new candidate (backfitting: a first effect fitted alone absorbs
+    part of a second one's signature)."""
+    base: Variant
+    effects: list
+
+    def variant(self, values=None) -> Variant:
+        v = self.base
+        for k, r in enumerate(self.effects):
+            v = r.candidate.build(v, float(r.value if values is None else values[k]))
+        return v
+
+
+def folds(n: int, k: int) -> np.ndarray:
+    """The fold of each of n strides (round robin over k folds, at least 2)."""
+    return np.arange(n) % max(2, min(k, n))
+
+
+class Search:
+    def __init__(self, data: StrideData, base: Variant, settings: Settings, progress: Progress = QUIET) -> None:
+        self.data, self.base, self.settings, self.progress = data, base, settings, progress
+        self.fold = folds(len(data.strides), settings.folds)
+
+    def stack(self, effects: list) -> Stack:
+        return Stack(self.base, list(effects))
+
+    def reference(self, stack: Stack) -> Reference:
+        """Per-stride trajectory SSE and the next-apex errors of the model `stack` (what additions are judged
+        against)."""
+        sim = simulate_variants(self.data, [stack.variant()])
+        return Reference(sim["sse"][0], Errors.of(self.data, {k: v[0] for k, v in sim["pred"].items()}))
+
+    def held_out(self, chosen: list[Scored]) -> Reference:
+        """Per stride, the trajectory SSE and the next apex's errors with the chosen effects at the magnitudes
+        fitted without the stride's fold."""
+        sse, pred = self._held_out(chosen)
+        return Reference(sse, Errors.of(self.data, pred))
+
+    def _held_out(self, chosen: list[Scored]) -> tuple[np.ndarray, dict]:
+        fold = self.fold
+        numbers = list(np.unique(fold))
+        variants = []
+        for fi in range(len(numbers)):
+            v = self.base
+            for r in chosen:
+                v = r.candidate.build(v, float(r.fit.fold_values[fi]))
+            variants.append(v)
+        sim = simulate_variants(self.data, variants)
+        rows, cols = np.array([numbers.index(f) for f in fold]), np.arange(len(fold))
+        return sim["sse"][rows, cols], {k: sim["pred"][k][rows, cols] for k in sim["pred"]}
+
+    def cumulative_errors(self, chosen: list[Scored]) -> list[Errors]:
+        """Held-out E_p/E_v/E_t after each accepted effect and those before it, at their final magnitudes."""
+        return [self.held_out(chosen[:k]).errors for k in range(1, len(chosen) + 1)]
+
+    # ---------------------------------------------------------------- ranking
+
+    def rank(self, stack: Stack, candidates: list[Candidate], reference: Reference,
+             grids: dict | None = None, label: str = "") -> list[Scored]:
+        """Grid each candidate's magnitude on top of `stack` (its accepted effects refitted at each grid value),
+        fit it per fold on the training strides, score it on the held-out ones. Best first."""
+        if not candidates:
+            return []
+        settings, data = self.settings, self.data
+        grids = grids or {c.name: search_grid(c, settings.grid) for c in candidates}
+        points = [partner_points(r) for r in stack.effects]
+        partner_rows = [None]
+        for i, (xs, centre, _, _) in enumerate(points):
+            for j in range(3):
+                if j != centre:
+                    values = [float(r.value) for r in stack.effects]
+                    values[i] = float(xs[j])
+                    partner_rows.append(values)
+        bases = [stack.variant(values) for values in partner_rows]
+        n = len(data.strides)
+        results = []
+        with self.progress.bar(len(candidates), label or self.progress.stage) as step:
+            for c in candidates:
+                grid = grids[c.name]
+                sim = simulate_variants(data, [c.build(b, float(v)) for b in bases for v in grid])
+                fit = Backfit(sim["sse"].reshape(len(bases), len(grid), n),
+                              {k: v.reshape(len(bases), len(grid), n) for k, v in sim["pred"].items()}, points)
+                results.append(self._fitted(c, grid, fit, points, reference))
+                step(c.name)
+        results.sort(key=lambda r: -r.reduction)
+        return results
+
+    def _fitted(self, c: Candidate, grid: np.ndarray, fit: Backfit, points: list, reference: Reference) -> Scored:
+        fold = folds(len(self.data.strides), self.settings.folds)
+        n = len(fold)
+        everything = np.arange(n)
+        partner_all = fit.partner_values(everything)
+        profile_all = fit.at(fit.sse, partner_all, everything).sum(axis=1)
+        floor = 0.5 * fit.sse[0].min(axis=0)
+        held, held_values = np.empty(n), np.empty(n)
+        pred_held = {k: np.empty((len(grid), n)) for k in fit.pred}
+        fold_values, partner_folds = [], [[] for _ in points]
+        for f in np.unique(fold):
+            train, test = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+            partner = fit.partner_values(train)
+            m = vertex(grid, fit.at(fit.sse, partner, train).sum(axis=1))
+            fold_values.append(m)
+            for i, x in enumerate(partner):
+                partner_folds[i].append(float(np.interp(m, grid, x)))
+            held[test] = np.maximum(quadratic_at(grid, fit.at(fit.sse, partner, test), m), floor[test])
+            held_values[test] = m
+            for k, block in fit.pred.items():
+                pred_held[k][:, test] = fit.at(block, partner, test)
+        value = vertex(grid, profile_all)
+        fit_total = float(quadratic_at(grid, profile_all[:, None], value)[0])
+        errors = Errors.of(self.data, interp_pred(grid, pred_held, held_values))
+        base_total = reference.sse.sum()
+        scored = Scored(c, Fit(value, fold_values, [float(np.interp(value, grid, x)) for x in partner_all],
+                               partner_folds, grid, float(1.0 - max(fit_total, 0.0) / base_total),
+                               float(1.0 - profile_all.min() / base_total)),
+                        c.physical(value), held, errors)
+        return acceptance.score(scored, self.data, reference, self.settings)
+
+    def search(self, stack: Stack, candidates: list[Candidate], reference: Reference) -> list[Scored]:
+        """`rank`, then `refine`."""
+        return self.refine(stack, self.rank(stack, candidates, reference), reference)
+
+    def refine(self, stack: Stack, ranking: list[Scored], reference: Reference, exact: int = 12) -> list[Scored]:
+        """Every candidate again on a fine grid between the neighbours of its best grid value (an SSE is not
+        parabolic where an effect switches on, e.g. a torque limit), then the best scored from strides simulated
+        at their fold magnitudes (no interpolation)."""
+        grids = {}
+        for r in ranking:
+            grid = r.fit.grid
+            k = int(np.argmin(np.abs(grid - r.value)))
+            grids[r.name] = np.linspace(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)], self.settings.grid)
+        refined = {r.name: r for r in self.rank(stack, [r.candidate for r in ranking], reference, grids=grids,
+                                                label=f"{self.progress.stage} (fine grid)")}
+        ranking = [refined[r.name] if refined[r.name].fit.fit_reduction > r.fit.fit_reduction else r
+                   for r in ranking]
+        ranking.sort(key=lambda r: -r.fit.fit_reduction)
+        best = ranking[:exact] + [r for r in ranking[exact:] if r.candidate.kind == "discovered"]
+        self.evaluate_exactly(stack, best, reference)
+        ranking.sort(key=lambda r: -r.reduction)
+        return ranking
+
+    def evaluate_exactly(self, stack: Stack, results: list[Scored], reference: Reference) -> None:
+        """Held-out scores of fitted candidates from strides simulated at their fold magnitudes."""
+        fold = self.fold
+        numbers = list(np.unique(fold))
+        variants = [r.candidate.build(stack.variant([p[fi] for p in r.fit.partner_fold_values]), float(v))
+                    for r in results for fi, v in enumerate(r.fit.fold_values)]
+        sim = simulate_variants(self.data, variants)
+        idx = np.array([numbers.index(f) for f in fold])
+        cols = np.arange(len(fold))
+        for k, r in enumerate(results):
+            rows = k * len(numbers) + idx
+            r.held_sse = sim["sse"][rows, cols]
+            r.errors = Errors.of(self.data, {key: v[rows, cols] for key, v in sim["pred"].items()})
+            acceptance.score(r, self.data, reference, self.settings)
+
+    def screen(self, stack: Stack, candidates: list[Candidate], located: set) -> list[Candidate]:
+        """The candidates worth a full search: the best by trajectory reduction on a subset of strides
+        (coarse grid), plus every candidate acting where locate sees a residual."""
+        settings = self.settings
+        n = len(self.data.strides)
+        if len(candidates) <= settings.screen:
+            return candidates
+        index = np.linspace(0, n - 1, min(n, settings.screen_strides)).round().astype(int)
+        subset = Search(dataclasses.replace(self.data, strides=self.data.strides.subset(index)), self.base,
+                        dataclasses.replace(settings, grid=5), self.progress)
+        ranked = subset.rank(stack, candidates, subset.reference(stack))
+        # the best grid point counts too: an SSE that is not parabolic in the magnitude (a torque limit) has a
+        # vertex far from its minimum on a coarse grid
+        ranked.sort(key=lambda r: -max(r.fit.fit_reduction, r.fit.grid_reduction))
+        keep = {r.name for r in ranked[:settings.screen]}
+        keep |= {c.name for c in candidates if c.kind != "sensor" and set(first_sites(c.site)) & located
+                 and any(r.name == c.name and r.reduction > 0 for r in ranked)}
+        return [c for c in candidates if c.name in keep]
+
+    # ---------------------------------------------------------------- refits beside accepted effects
+
+    def polish(self, partners: list[Scored], result: Scored, reference: Reference) -> Scored:
+        """The joint fit of `result` with its partners, repeated from the refitted magnitudes: each pass refits
+        the partners by a quadratic about their values, exact once the magnitudes stop moving."""
+        stack = self.stack(partners)
+        for _ in range(self.settings.polish if partners else 0):
+            adopt(partners, result)
+            step = np.diff(result.fit.grid).max()
+            grid = {result.name: np.linspace(result.value - step, result.value + step, self.settings.grid)}
+            again = self.rank(stack, [result.candidate], reference, grids=grid)
+            self.evaluate_exactly(stack, again, reference)
+            moved = [abs(a - b) for a, b in zip(again[0].fit.partner_values, [r.value for r in partners])]
+            if again[0].reduction < result.reduction:
+                break
+            result.adopt(again[0])
+            if all(m <= 1e-3 * (r.candidate.high - r.candidate.low) for m, r in zip(moved, partners)):
+                break
+        adopt(partners, result)
+        return result
+
+
+def adopt(chosen: list[Scored], result: Scored) -> None:
+    """The accepted effects take the magnitudes they were refitted to beside `result`."""
+    for r, value, fold_values in zip(chosen, result.fit.partner_values, result.fit.partner_fold_values):
+        r.move_to(value, fold_values)

@@ -1,0 +1,52 @@
+"""The statistics that decide what the mismatch tool names (config/diagnosis.yaml, docs/diagnosis.md)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from hopper_ros.config import load_yaml
+
+
+@dataclass
+class Settings:
+    folds: int = 5
+    grid: int = 7
+    min_strides: int = 6
+    max_effects: int = 3
+    min_reduction: float = 0.10      # held-out trajectory SSE must fall by at least this share ...
+    min_total_reduction: float = 0.02  # ... and by this share of the model's own SSE (later rounds: not noise)
+    min_t: float = 3.0               # ... with a one-sided t of the per-stride log ratio
+    apex_tolerance: float = 0.01     # a held-out E_p/E_v/E_t may not grow by more than this share
+    apex_improvement: float = 0.03   # ... and their sum must fall by at least this share
+    sensor_alone: float = 0.5        # a sensor fault that leaves the next apex as it was must explain this share
+    sensor_margin: float = 0.15      # a sensor effect must beat the best physics effect's reduction by this share
+    discovery_margin: float = 0.15   # a discovered term set must beat the best library effect by this share
+    margin_residual: float = 0.5     # ... or (a sensor) leave at most this share of what it leaves (paired t >= min_t)
+    near_full: float = 0.95          # ... when it removes at least this share of the held-out residual
+    tie_t: float = 2.5               # an effect fitting held-out strides not worse by this t is a look-alike ...
+    tie_share: float = 0.02          # ... and so is one whose reduction is within this share of the best's
+    locate_threshold: float = 2.5    # residual over noise for a site to stand out
+    screen: int = 8                  # candidates the screening passes on to the full search
+    screen_strides: int = 24         # strides the screening uses
+    liftoff_window: float = 0.003
+    exchange: int = 3                # runners-up tried as the partner of an exchanged effect
+    polish: int = 3                  # passes of the joint refit of an accepted effect with the earlier ones
+    restarts: int = 3                # first-round runners-up that start the rounds again ...
+    restart_threshold: float = 5.0   # ... when the accepted set leaves a residual this far over the noise level
+    trajectory_threshold: float = 10.0   # nothing located by force: a re-simulated phase this many noise levels off
+    secondary_grid: int = 5          # values of an accepted entry's secondary parameter tried (geometric)
+
+
+def load_settings(path="diagnosis.yaml") -> Settings:
+    data = load_yaml(path)
+    values = data.get("diagnosis", data) if isinstance(data, dict) else None
+    if not isinstance(values, dict):
+        raise ValueError(f"{path}: expected a mapping under `diagnosis:`")
+    known = {f for f in Settings.__dataclass_fields__}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"{path}: diagnosis: unknown key(s) {unknown}; known: {sorted(known)}")
+    try:
+        return Settings(**{k: type(getattr(Settings, k))(v) for k, v in values.items()})
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: diagnosis: {exc}") from None
