@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,9 +20,11 @@ from hopper_ros.physics import lanes, laws
 from hopper_ros.physics.evaluation import sample_thesis_strides
 from hopper_ros.physics.exact import simulate_stride
 from hopper_ros.sim.config import EFFECTS, SimConfig, load_sim_config
-from hopper_ros.sim.experiment import StrideExperiment, drive_hold
+from hopper_ros.sim.experiment import ExperimentSeries, StrideExperiment, drive_hold
+from hopper_ros.sim.plant import Plant
 from hopper_ros.sim.robot import SimRobot
 
+REPO = Path(__file__).resolve().parent.parent
 HARDWARE = load_hardware()
 BASE = load_sim_config()
 # the extended TD-SLIP model's own terms, each taken out of the physics
@@ -156,6 +162,56 @@ def test_the_plant_and_the_lanes_integrator_are_one_model(library_strides):
         assert apex.z == pytest.approx(result.next_apex_height[i], rel=1e-3), name
         assert apex.ydot == pytest.approx(result.next_forward_speed[i], rel=3e-3), name
         assert apex.t == pytest.approx(result.stride_time[i], abs=2e-3), name
+
+
+def _series_samples(config, compiled, periods):
+    """Section 4.1's experiments one after another for `periods` periods, the plant's kernel compiled or not."""
+    robot = SimRobot(config, HARDWARE)
+    robot.plant = Plant(config, robot.motor.leg_inertia_total, robot.motor.leg_friction, compiled=compiled)
+    assert robot.plant.kernel.compiled == compiled
+    series = ExperimentSeries(robot, seed=3)
+    samples = []
+    for _ in range(periods):
+        if robot.experiment is None or robot.experiment.done:
+            series.start_next()
+        samples.append(robot.step())
+    return samples
+
+
+def test_the_compiled_plant_and_the_python_plant_give_the_same_strides():
+    """The plant's kernel compiled by numba (the default) and in Python (where numba is missing): with every effect
+    on, the same events (touchdown, bottom, lift-off, apex, falls and a scuffed landing) and the same truth, force
+    plate and packets every period, to rounding."""
+    pytest.importorskip("numba")
+    config = BASE.with_effects(**{name: True for name in EFFECTS})
+    compiled, python = (_series_samples(config, flag, 1000) for flag in (True, False))
+    events = [(e.kind, e.t, e.y, e.z, e.ydot, e.zdot, e.leg_angle) for s in compiled for e in s.events]
+    reference = [(e.kind, e.t, e.y, e.z, e.ydot, e.zdot, e.leg_angle) for s in python for e in s.events]
+    assert {e[0] for e in events} == {"apex", "touchdown", "bottom", "liftoff", "fall"}
+    assert [e[0] for e in events] == [e[0] for e in reference]
+    np.testing.assert_allclose([e[1:] for e in events], [e[1:] for e in reference], rtol=0, atol=1e-12)
+
+    def series(samples):
+        return np.array([(s.truth.y, s.truth.z, s.truth.ydot, s.truth.zdot, s.truth.leg_angle, s.truth.leg_rate,
+                          s.truth.hip_torque, s.force.forward, s.force.vertical) for s in samples])
+
+    np.testing.assert_allclose(series(compiled), series(python), rtol=1e-12, atol=1e-12)
+    assert [s.packet for s in compiled] == [s.packet for s in python]
+
+
+def test_without_numba_the_plant_runs_in_python():
+    script = ("import sys; sys.modules['numba'] = None\n"
+              "from hopper_ros.hardware.config import load_hardware\n"
+              "from hopper_ros.sim.config import load_sim_config\n"
+              "from hopper_ros.sim.robot import SimRobot\n"
+              "robot = SimRobot(load_sim_config(), load_hardware())\n"
+              "robot.throw(0.4, 2.0, 0.3)\n"
+              "samples = robot.run_until(lambda s: any(e.kind == 'touchdown' for e in s.events), 1.0)\n"
+              "print(robot.plant.kernel.compiled, samples[-1].events[0].kind)\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=REPO, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["False", "touchdown"]
 
 
 def test_ground_compliance_lets_the_toe_sink_by_force_over_stiffness():

@@ -11,6 +11,9 @@ checks after each step), so the two paths agree to rounding. A lane that has fal
 and its remaining samples are copied instead of integrated; a lane given a number of `needed` samples
 stops once it has them and has found its next apex (or fallen), its later samples nan.
 
+`compile_kernels` compiles other modules' functions written the same way (the simulated robot's step,
+`hopper_ros.sim.plant`) with these laws.
+
 Compiled code is cached on disk (`cache_directory`), in a folder named by a hash of the sources it is
 compiled from (numba alone would check only this file's time stamp, not the laws').
 """
@@ -308,3 +311,18 @@ def integrate(c: laws.Coefficients, apex_height, forward_speed, theta_td, tau_0,
     needed = np.full(n, samples, dtype=np.int64) if needed is None else np.asarray(needed, dtype=np.int64)
     _lanes(lanes, *columns, float(h), int(steps_per_sample), int(samples), needed, out, apex, events, fell)
     return out, apex, events, fell
+
+
+# ---------------------------------------------------------------------------- kernels written elsewhere like the laws
+
+
+def compile_kernels(entries, helpers=()):
+    """`entries` compiled by numba (cached on disk with the lanes): functions written like the laws, for one set of
+    floats, that call `laws` and `helpers` (functions of their own module written the same way, compiled where they
+    are called); their coefficients are records (`records`). Returns the compiled entries, in order.
+
+    numba checks an entry's own file for changes; the laws' and this module's are in the cache folder's name.
+    """
+    for helper in helpers:
+        register_jitable(helper)
+    return [numba.njit(cache=True, error_model="numpy")(entry) for entry in entries]
