@@ -3,7 +3,9 @@
 - sim_realtime_factor: the sim_robot node in its own process, lockstep mode, running section
   4.1's single-stride experiments itself: simulated time over wall time, with everything a
   period costs (physics, regulator, UDP packet, force plate and ground truth published on ROS).
-  Target >= 5.
+  Target >= 20 (issue 27: the plant's step compiled by numba, `hopper_ros.sim.plant.kernel`).
+- sim_realtime_factor_python: the same run with the plant's step in Python (HOPPER_LANES=numpy, as
+  where numba is missing), measured beside it.
 - sim_realtime_mode_factor: the same in real-time mode, which must pace at 1.0 (it was a unit
   test's assertion; timing lives here).
 - sim_period_p50_us / sim_period_p99_us: cost of one 1 ms period in Python alone (SimRobot.step
@@ -32,12 +34,13 @@ from hopper_ros.sim.experiment import ExperimentSeries, StrideExperiment, drive_
 from hopper_ros.sim.robot import SimRobot  # noqa: E402
 
 
-
-
-def node_realtime_factor(duration: float, mode: str = "lockstep") -> float:
-    """The sim_robot node's own simulated-over-wall time for a run of `duration` simulated seconds."""
+def node_realtime_factor(duration: float, mode: str = "lockstep", python_plant: bool = False) -> float:
+    """The sim_robot node's own simulated-over-wall time for a run of `duration` simulated seconds (`python_plant`:
+    the plant's step in Python, not compiled)."""
     effects = "[" + ", ".join(EFFECTS) + "]"
     env = child_env(unbuffered=True)
+    if python_plant:
+        env["HOPPER_LANES"] = "numpy"
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sink:
         sink.bind(("127.0.0.1", 0))
         command = [sys.executable, "-m", "hopper_ros.cli", "run", "sim_robot", "--ros-args",
@@ -97,6 +100,8 @@ def run(quick=False):
     costs = period_costs(2.0 if quick else 10.0)
     return [
         {"name": "sim_realtime_factor", "value": node_realtime_factor(5.0 if quick else 30.0), "unit": "x"},
+        {"name": "sim_realtime_factor_python", "value": node_realtime_factor(5.0 if quick else 30.0, python_plant=True),
+         "unit": "x"},
         {"name": "sim_realtime_mode_factor", "value": node_realtime_factor(3.0, "realtime"), "unit": "x"},
         {"name": "sim_period_p50_us", "value": 1e6 * percentile(costs, 0.5), "unit": "us"},
         {"name": "sim_period_p99_us", "value": 1e6 * percentile(costs, 0.99), "unit": "us"},
