@@ -112,6 +112,7 @@ class StrideData:
     # variant key -> (SSE, next apex) per stride, simulated once (`simulate.simulate_variants`); not passed on by
     # dataclasses.replace: a subset of the strides has its own
     simulated: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    located: dict = field(default_factory=dict, init=False, repr=False, compare=False)   # ... (locate.locate)
 
     @property
     def liftoffs(self) -> np.ndarray:

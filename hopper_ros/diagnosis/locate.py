@@ -24,7 +24,7 @@ from hopper_ros.physics import lanes, laws
 
 from .data import LEAD_RESOLVED, StrideData
 from .ringing import ringing, since_liftoff
-from .simulate import Variant
+from .simulate import Variant, variant_key
 from .sites import CHANNEL_SITE, REGISTRY, RESIDUAL_SITES, TRAJECTORY_SITES
 from .smoothing import smooth
 
@@ -316,7 +316,15 @@ def trajectory_location(by_phase: np.ndarray, counts: np.ndarray, threshold: flo
 
 
 def locate(data: StrideData, variant: Variant) -> tuple[list[Location], tuple]:
-    """Every site with its residual over the noise level, largest first; and the residual sets for discovery."""
+    """Every site with its residual over the noise level, largest first; and the residual sets for discovery.
+    Found once per variant of a recording (`StrideData.located`: the twins' noise has a fixed seed)."""
+    key = variant_key(variant)
+    if key not in data.located:
+        data.located[key] = _locate(data, variant)
+    return data.located[key]
+
+
+def _locate(data: StrideData, variant: Variant) -> tuple[list[Location], tuple]:
     rec, clean, noisy = sets = residual_sets(data, variant)
     found = []
     for site in RESIDUAL_SITES:
