@@ -137,6 +137,18 @@ def _solve(gram, rhs):
     return np.linalg.solve(normed, rhs / scale) / scale
 
 
+def _solve_folds(grams, rhss):
+    """`_solve` for every fold's training set at once ((folds, k, k), (folds, k)): the same normalisation,
+    condition check and solve per fold, in one call each; None where any fold's columns are collinear."""
+    scale = np.sqrt(np.diagonal(grams, axis1=1, axis2=2))
+    if np.any(scale <= 0):
+        return None
+    normed = grams / (scale[:, :, None] * scale[:, None, :])
+    if np.any(np.linalg.cond(normed) > 1e8):
+        return None
+    return np.linalg.solve(normed, (rhss / scale)[:, :, None])[:, :, 0] / scale
+
+
 def _cross_validate(per_stride, max_terms: int):
     """Best-subset selection by cross-validation over strides: every subset of at most `max_terms` terms
     (collinear ones skipped: a sign of a velocity that never changes sign in the phase is a constant) fitted
@@ -147,22 +159,23 @@ def _cross_validate(per_stride, max_terms: int):
     fold = np.arange(n) % FOLDS
     gram, rhs, yy = _grams(per_stride)
     total_gram, total_rhs = gram.sum(axis=0), rhs.sum(axis=0)
-    fold_gram = [gram[fold == f].sum(axis=0) for f in range(FOLDS)]
-    fold_rhs = [rhs[fold == f].sum(axis=0) for f in range(FOLDS)]
+    training_gram = np.array([total_gram - gram[fold == f].sum(axis=0) for f in range(FOLDS)])
+    training_rhs = np.array([total_rhs - rhs[fold == f].sum(axis=0) for f in range(FOLDS)])
+    rows = [np.flatnonzero(fold == f) for f in range(FOLDS)]
+    held_out = [(yy[r], rhs[r], gram[r]) for r in rows]
     tried = []
     for size in range(1, max_terms + 1):
         for subset in itertools.combinations(range(gram.shape[1]), size):
-            ix = np.ix_(subset, subset)
+            columns = list(subset)
+            coefs = _solve_folds(training_gram[:, columns][:, :, columns], training_rhs[:, columns])
+            if coefs is None:
+                continue
             held = np.empty(n)
-            for f in range(FOLDS):
-                coef = _solve(total_gram[ix] - fold_gram[f][ix], total_rhs[list(subset)] - fold_rhs[f][list(subset)])
-                if coef is None:
-                    break
-                rows = np.flatnonzero(fold == f)
-                held[rows] = (yy[rows] - 2 * rhs[rows][:, subset] @ coef
-                              + np.einsum("i,nij,j->n", coef, gram[rows][:, subset][:, :, subset], coef))
-            else:
-                tried.append((held.sum(), size, subset, held))
+            for f, (y2, xy, xx) in enumerate(held_out):
+                coef = coefs[f]
+                held[rows[f]] = (y2 - 2 * xy[:, subset] @ coef
+                                 + np.einsum("i,nij,j->n", coef, xx[:, subset][:, :, subset], coef))
+            tried.append((held.sum(), size, subset, held))
     if not tried:
         return None
     best = min(tried, key=lambda trial: trial[0])
