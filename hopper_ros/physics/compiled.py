@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import tempfile
 from pathlib import Path
 
 import numba
@@ -45,10 +46,18 @@ def _sources_hash() -> str:
 
 
 def cache_directory() -> Path:
-    """Where the compiled lanes are kept: $NUMBA_CACHE_DIR if set, else the user's cache folder."""
+    """Where the compiled code is kept: $NUMBA_CACHE_DIR if set, else the user's cache folder; where that cannot be
+    written (a read-only home), the temporary folder."""
     base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "hopper_ros", "numba")
-    return Path(base) / _sources_hash()
+    for folder in (Path(base), Path(tempfile.gettempdir()) / f"hopper_ros-numba-{os.getuid()}"):
+        try:
+            (folder / _sources_hash()).mkdir(parents=True, exist_ok=True)
+        except OSError:
+            continue
+        if os.access(folder / _sources_hash(), os.W_OK):
+            return folder / _sources_hash()
+    raise ImportError(f"no folder to keep compiled code in ({base} cannot be written)")
 
 
 numba.config.CACHE_DIR = str(cache_directory())

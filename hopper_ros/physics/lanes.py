@@ -81,7 +81,7 @@ def compiled_backend():
             try:
                 from . import compiled
                 _COMPILED = compiled
-            except ImportError as exc:
+            except Exception as exc:     # numba missing, or it cannot work here (no cache folder, no LLVM)
                 print(f"hopper_ros: the compiled lanes are not available ({exc}); physics.lanes runs on numpy, "
                       "about 20 times slower (pip install numba)", file=sys.stderr)
                 _COMPILED = False
