@@ -206,7 +206,7 @@ def _run(case, tmp: Path) -> tuple:
     bad = folder / Path(base).name
     bad.write_text(yaml.safe_dump(_mutated(base, path, value), sort_keys=False))
     args = [a.format(bad, out=folder / "out") if "{}" in a else a.replace("{out}", str(folder / "out")) for a in argv]
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONFAULTHANDLER="1")   # a crash says where
     result = subprocess.run([sys.executable, "-m", "hopper_ros.cli", *args], capture_output=True, text=True,
                             timeout=120, env=env, cwd=folder)
     return case, bad, result

@@ -115,7 +115,7 @@ class Search:
         return results
 
     def _fitted(self, c: Candidate, grid: np.ndarray, fit: Backfit, points: list, reference: Reference) -> Scored:
-        fold = folds(len(self.data.strides), self.settings.folds)
+        fold = self.fold
         n = len(fold)
         everything = np.arange(n)
         partner_all = fit.partner_values(everything)

@@ -76,6 +76,21 @@ def _executor():
     return SingleThreadedExecutor(), _SPIN_PERIOD
 
 
+def _half_built(exc: BaseException) -> list:
+    """The nodes whose constructor raised `exc` after rclpy had built them (e.g. a bad config file read
+    from a parameter): destroyed explicitly before rclpy shuts down, never left to the collector at exit,
+    where rcl handles outliving their context can crash the process (seen once as SIGSEGV under load)."""
+    from rclpy.node import Node
+
+    found, frame = [], exc.__traceback__
+    while frame is not None:
+        candidate = frame.tb_frame.f_locals.get("self")
+        if isinstance(candidate, Node) and all(candidate is not each for each in found):
+            found.append(candidate)
+        frame = frame.tb_next
+    return found
+
+
 def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] | None = None) -> int:  # noqa: F821
     """Run one node until SIGINT/SIGTERM; returns the process exit status (0: clean stop). A factory
     may return a list of nodes (a container: all on the one executor, the first one logs; its
@@ -92,10 +107,11 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
 
     import rclpy
     from rclpy.executors import ExternalShutdownException
+    from rclpy.node import Node
     from rclpy.signals import SignalHandlerOptions
 
     node = None
-    nodes = []
+    nodes, half_built = [], []
     executor = None
     status = 0
     try:
@@ -121,6 +137,8 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as exc:  # noqa: BLE001 - a node's failure is reported, then we clean up
+        if node is None:
+            half_built = _half_built(exc)
         if stop.received is None:  # otherwise: the shutdown interrupted start-up, not an error
             status = 1
             if isinstance(exc, (ValueError, OSError)) and node is None:
@@ -135,6 +153,8 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
             executor.shutdown(timeout_sec=1.0)
         for each in reversed(nodes):
             each.destroy_node()
+        for each in half_built:   # rclpy's own destroy: the subclass's may need what its constructor never set
+            Node.destroy_node(each)
         gc.collect()    # a node whose constructor failed (bad config) is freed while its context lives: left to the
         rclpy.try_shutdown()   # interpreter's exit, rcl handles outlive their context and the process may crash
         stop.uninstall()
