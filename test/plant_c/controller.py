@@ -9,16 +9,18 @@ The choice is a one-step search over a grid with the controller's own copy of th
 extended TD-SLIP model (flight closed form, stance (2.9) integrated by a fixed-step RK4 on all
 candidates at once, lift-off (2.28) or rho = rho0, collision (2.12)):
 
-    minimise  ((z' - z*)/0.015)^2 + ((v' - v*)/0.12)^2 + ((tau_0 - tau_pref)/2.5)^2
-              + ((theta_td - theta_pref)/0.2)^2
+    minimise  ((z' - z*)/0.015)^2 + ((v' - v*)/0.12)^2 + ((tau_0 - tau_pref)/1.5)^2
+              + ((theta_td - theta_pref)/0.12)^2
 
-over theta_td in [0.16, 0.58] rad and tau_0 in [0, 8] N m, with (z', v') the predicted next
-apex.  The targets (z*, v*) are redrawn every 3-6 strides from [0.27, 0.40] m x [0.9, 2.3] m/s
-and the preferences (tau_pref, theta_pref) every stride, so the apex heights, speeds and inputs
-spread (excitation); candidates whose predicted stride leaves the envelope are excluded.
-t_f = f * 0.072 s with f uniform in [0.65, 1.1] each stride.  A small jitter is added to the
-chosen inputs.  The controller knows nothing of the mechanisms: feedback from stride to stride
-copes with them.
+over theta_td in [0.16, 0.58] rad (22 values) and tau_0 in [0, 8] N m (9 values), with
+(z', v') the predicted next apex.  The targets (z*, v*) are redrawn every 3-6 strides from
+[0.25, 0.36] m x [0.8, 2.2] m/s and the preferences tau_pref ~ U(0, 8) N m, theta_pref ~
+U(0.18, 0.55) rad every stride, so the apex heights, speeds and inputs spread (excitation);
+candidates whose predicted next apex leaves [0.23, 0.45] m x [0.6, 2.6] m/s are excluded.
+t_f = f * 0.072 s with f ~ U(0.7, 1.15) each stride (the torque stops at lift-off if t_f is
+longer than the stance).  A jitter of +-0.008 rad and +-0.4 N m is added to the chosen inputs.
+Throws: apex height ~ U(0.30, 0.44) m, speed ~ U(0.9, 2.3) m/s.  The controller knows nothing
+of the mechanisms: feedback from stride to stride copes with them.
 """
 
 from __future__ import annotations
@@ -32,8 +34,8 @@ from plant import Command, Params
 THETA_RANGE = (0.16, 0.58)
 TAU_RANGE = (0.0, 8.0)
 T_STANCE_NOM = 0.072      # [s] the nominal stance duration that t_f is scaled from
-Z_TARGETS = (0.27, 0.40)
-V_TARGETS = (0.9, 2.3)
+Z_TARGETS = (0.25, 0.36)
+V_TARGETS = (0.8, 2.2)
 ENVELOPE_Z = (0.23, 0.45)
 ENVELOPE_V = (0.6, 2.6)
 
@@ -181,12 +183,12 @@ class Controller:
         self._targets()
         tau_pref = rng.uniform(*TAU_RANGE)
         th_pref = rng.uniform(0.18, 0.55)
-        t_f = rng.uniform(0.65, 1.1) * T_STANCE_NOM
+        t_f = rng.uniform(0.7, 1.15) * T_STANCE_NOM
         z_n, v_n, ok, st = self.model.next_apex(z_a, v_a, self.TH, self.TAU, t_f)
         ok &= (z_n > ENVELOPE_Z[0]) & (z_n < ENVELOPE_Z[1])
         ok &= (v_n > ENVELOPE_V[0]) & (v_n < ENVELOPE_V[1])
         cost = (((z_n - self.z_star) / 0.015) ** 2 + ((v_n - self.v_star) / 0.12) ** 2
-                + ((self.TAU - tau_pref) / 2.5) ** 2 + ((self.TH - th_pref) / 0.2) ** 2)
+                + ((self.TAU - tau_pref) / 1.5) ** 2 + ((self.TH - th_pref) / 0.12) ** 2)
         cost = np.where(ok & np.isfinite(cost), cost, np.inf)
         i = int(np.argmin(cost))
         if not np.isfinite(cost[i]):
@@ -211,4 +213,4 @@ class Controller:
         return cmd, z_a, v_a
 
     def throw_state(self) -> tuple[float, float]:
-        return float(self.rng.uniform(0.28, 0.40)), float(self.rng.uniform(1.0, 2.1))
+        return float(self.rng.uniform(0.30, 0.44)), float(self.rng.uniform(0.9, 2.3))

@@ -240,7 +240,7 @@ class TiltedPivot(Mechanism):
 class FloorBoard(Mechanism):
     id = "floor_board"
     family = "a board on part of the track: a stepped floor"
-    site = ["touchdown", "stance"]
+    site = "touchdown"
     unit = "m"
     words = ("A board of thickness H covers a stretch of the circular track (from y0 over a "
              "length l, every lap L): strides that touch down on it meet the floor H higher; "
@@ -288,7 +288,7 @@ class AzimuthEccentricity(Mechanism):
 class ElevationCouplingSlip(Mechanism):
     id = "elevation_coupling_slip"
     family = "the elevation encoder's coupling slips at the touchdown shocks"
-    site = ["touchdown", "sensor"]
+    site = "sensor"
     unit = "m"
     words = ("The elevation encoder's shaft coupling slips at each touchdown shock: the "
              "encoder disc overruns downward by a random number of counts (Poisson, mean "

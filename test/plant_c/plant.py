@@ -33,7 +33,7 @@ Nothing here is shared with hopper_ros; the nominal numbers are read from config
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -375,11 +375,10 @@ class Plant:
             t, X = sol.t[-1], sol.y[:, -1].copy()
         raise StrideFailure("no event in flight")
 
-    def _sample_flight(self, segments, t_end, include_end=False):
+    def _sample_flight(self, segments):
         out = []
-        for i, (ta, tb, sol) in enumerate(segments):
-            last = i == len(segments) - 1
-            ts = _grid(ta, tb, include_end and last)
+        for ta, tb, sol in segments:
+            ts = _grid(ta, tb)
             if len(ts) == 0:
                 continue
             Xs = sol(ts)
@@ -490,7 +489,7 @@ class Plant:
         touchdown.terminal, touchdown.direction = True, -1
         t_td, X_td, seg_desc = self._integrate_flight(self.t, X, touchdown,
                                                       self.t + self.MAX_FLIGHT)
-        samples = self._sample_flight(seg_desc, t_td)
+        samples = self._sample_flight(seg_desc)
         # touchdown geometry
         th_td, thd_sw, _ = self.swing(t_td)
         rf, rho0 = self.r_f, p.rho0
@@ -569,7 +568,7 @@ class Plant:
         if self.apex_velocity(Xf) <= 0:
             raise StrideFailure("no upward velocity after lift-off")
         t_ap, X_ap, seg_asc = self._integrate_flight(t_lo, Xf, apex, t_lo + self.MAX_FLIGHT)
-        samples += self._sample_flight(seg_asc, t_ap)
+        samples += self._sample_flight(seg_asc)
         self.t, self.X = t_ap, X_ap
         self.cmd_next = nxt
         return dict(

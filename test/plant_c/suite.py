@@ -66,6 +66,7 @@ def simulate(name: str, ids: list[str], seed: int, strides: int = STRIDES,
         while k < want:
             def plan_next(t_lo, y_lo, z_lo, vy, vz):
                 return ctl.at_liftoff(z_lo, vy, vz)[0]
+            swing_end = plant.swing.t_end
             try:
                 r = plant.stride(cmd, plan_next)
             except StrideFailure as exc:
@@ -75,7 +76,8 @@ def simulate(name: str, ids: list[str], seed: int, strides: int = STRIDES,
             k += 1
             a = r["apex_next"]
             log.append(dict(run=throws, z_apex=a["z"], v_apex=a["vy"], theta_td=cmd.theta_td,
-                            tau0=cmd.tau0, t_f=cmd.t_f, t_stance=r["t_lo"] - r["t_td"]))
+                            tau0=cmd.tau0, t_f=cmd.t_f, t_stance=r["t_lo"] - r["t_td"],
+                            hold=r["t_td"] - swing_end, floor=r["touchdown"]["floor"]))
             cmd = plant.cmd_next
             if not (ENVELOPE_Z[0] - 0.02 < a["z"] < ENVELOPE_Z[1] + 0.02
                     and ENVELOPE_V[0] - 0.2 < a["vy"] < ENVELOPE_V[1] + 0.2):
@@ -119,6 +121,7 @@ def _job(args):
     return (f"{name:42s} strides {truth['strides']:3d} runs {len(set(e['run'] for e in ok)):2d} "
             f"fail {len(fails)}  apex z {min(z):.3f}-{max(z):.3f}  v {min(v):.2f}-{max(v):.2f}"
             f"  tau0 {min(tau):.1f}-{max(tau):.1f}  th_td {min(th):.2f}-{max(th):.2f}"
+            f"  hold >= {1e3 * min(e['hold'] for e in ok):.0f} ms"
             f"  {time.time() - t0:5.1f} s")
 
 
