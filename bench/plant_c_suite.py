@@ -1,0 +1,119 @@
+"""Scores `hopper diagnose` on recordings of plant C (test/plant_c/): a third plant written blind, from the
+thesis and the legged-robot literature, by an author who read neither the diagnosis code, the effect library
+nor the issues, with 13 mechanisms outside the library's families (issue 28).
+
+    python bench/plant_c_suite.py FOLDER [names...]      (FOLDER from test/plant_c/suite.py)
+
+Per concealed mechanism, one of:
+- by mechanism: an accepted effect that is the same law, its magnitude within 25 % (`SAME`; today the library
+  holds none of plant C's laws, so this counts only what a later engine names by mechanism);
+- look-alike: the nearest library law, or discovered terms at a site where the mechanism acts (`NEAR`);
+- missed.
+An accepted effect matching no concealed mechanism is a false verdict; a clean recording is flagged when
+anything is accepted or something unmodelled is reported. The table (`MATCH`) was written before the first
+score and is not tuned to it.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+# plant-C mechanism -> (library entries that are a look-alike of its law, discovered sites where it acts)
+NEAR = {
+    "leg_swing_reaction": ({"flight_damping_horizontal", "flight_damping_vertical", "horizontal_inertia",
+                            "quadratic_drag"}, {"flight_horizontal", "flight_vertical"}),
+    "air_chamber": ({"spring_cubic", "leg_stiffness", "leg_damping", "quadratic_leg_damping", "spring_preload",
+                     "leg_friction", "rest_length"}, {"stance_along"}),
+    "spring_hysteresis": ({"leg_friction", "leg_damping", "quadratic_leg_damping", "leg_stiffness"},
+                          {"stance_along"}),
+    "motor_back_emf": ({"torque_saturation", "hip_viscous_friction", "torque_gain", "hip_dry_friction"},
+                       {"stance_hip"}),
+    "boom_bending": ({"ground_compliance", "touchdown_loss_along", "liftoff_collision", "leg_stiffness",
+                      "z_delay"}, {"touchdown_along", "liftoff_along", "stance_along", "flight_vertical"}),
+    "tilted_pivot": ({"ground_height", "boom_friction_horizontal", "flight_damping_horizontal"},
+                     {"touchdown_timing", "flight_horizontal"}),
+    "floor_board": ({"ground_height"}, {"touchdown_timing", "touchdown_along"}),
+    "azimuth_eccentricity": ({"y_scale", "y_delay"}, set()),
+    "elevation_coupling_slip": ({"z_offset", "ground_height"}, set()),
+    "gear_windup": ({"theta_delay", "theta_scale", "theta_offset"}, {"stance_hip"}),
+    "round_foot": ({"rest_length", "leg_stiffness", "touchdown_loss_along", "touchdown_loss_across", "ground_height"},
+                   {"stance_along", "stance_hip", "touchdown_along", "touchdown_across", "touchdown_timing"}),
+    "boom_centripetal": ({"effective_gravity", "horizontal_inertia", "flight_damping_horizontal",
+                          "flight_damping_vertical"}, {"flight_vertical", "flight_horizontal"}),
+    "servo_handoff": ({"hip_viscous_friction", "torque_offset", "actuation_delay", "actuator_lag", "torque_gain"},
+                      {"stance_hip"}),
+}
+# plant-C mechanism -> {the name an engine would give its own law: converter of plant C's magnitude}
+SAME: dict = {mechanism: {} for mechanism in NEAR}
+
+
+def score(result, truth: dict) -> dict:
+    """By mechanism, look-alike, missed, false verdicts; whether a clean recording was flagged."""
+    used, by_mechanism, alike, misses = set(), [], [], []
+    for effect in truth["effects"]:
+        names, sites = NEAR.get(effect["id"], (set(), set()))
+        same = SAME.get(effect["id"], {})
+        found = None
+        for k, r in enumerate(result.chosen):
+            for option in [r] + list(r.ties):
+                c = option.candidate
+                if c.name in same:
+                    want = same[c.name](float(effect["magnitude"]))
+                    if abs(option.magnitude - want) <= 0.25 * abs(want):
+                        found = (k, "mechanism", f"{c.name} {option.magnitude:.4g} (true {want:.4g})")
+                elif c.name in names:
+                    found = (k, "alike", f"{c.name} {option.magnitude:.4g}")
+                elif c.kind == "discovered" and c.site in sites:
+                    found = (k, "alike", f"{c.name}: {c.describe(option.value)}")
+                if found:
+                    break
+            if found:
+                break
+        if found is None:
+            misses.append(effect["id"])
+            continue
+        used.add(found[0])
+        (by_mechanism if found[1] == "mechanism" else alike).append((effect["id"], found[2]))
+    false = [r.name for k, r in enumerate(result.chosen) if k not in used]
+    flagged = bool(result.chosen) or result.verdict != "no significant mismatch"
+    return {"by_mechanism": by_mechanism, "alike": alike, "misses": misses, "false_verdicts": false,
+            "effects": len(truth["effects"]), "clean": not truth["effects"], "flagged": flagged}
+
+
+def summarise(rows: list[dict]) -> dict:
+    effects = sum(r["effects"] for r in rows)
+    return {"named_by_mechanism_pct": 100.0 * sum(len(r["by_mechanism"]) for r in rows) / max(effects, 1),
+            "alike_pct": 100.0 * sum(len(r["alike"]) for r in rows) / max(effects, 1),
+            "missed": sum(len(r["misses"]) for r in rows),
+            "false_verdicts": sum(len(r["false_verdicts"]) for r in rows if not r["clean"]),
+            "clean_flagged": sum(1 for r in rows if r["clean"] and r["flagged"]),
+            "recordings": len(rows), "effects": effects, "rows": rows}
+
+
+def run(folder: Path, names=None, verbose: bool = True) -> dict:
+    from hopper_ros.diagnosis import diagnose_file
+
+    rows = []
+    for truth_path in sorted(folder.glob("*.json")):
+        if names and truth_path.stem not in names:
+            continue
+        truth = json.loads(truth_path.read_text())
+        result = diagnose_file(truth_path.with_suffix(".csv"))
+        s = score(result, truth)
+        s.update(name=truth_path.stem, seconds=result.wall_time, verdict=result.verdict,
+                 before=result.before.as_dict(), after=result.after.as_dict())
+        if verbose:
+            print(f"{s['name']}: mechanism {s['by_mechanism']} alike {s['alike']} missed {s['misses']} false "
+                  f"{s['false_verdicts']}, {s['seconds']:.0f} s | {s['verdict']}", flush=True)
+        rows.append(s)
+    return summarise(rows)
+
+
+if __name__ == "__main__":
+    summary = run(Path(sys.argv[1]), sys.argv[2:] or None)
+    print(json.dumps({k: v for k, v in summary.items() if k != "rows"}, indent=1))
+    (Path(sys.argv[1]) / "score.json").write_text(json.dumps(summary, indent=1, default=str))
