@@ -190,3 +190,71 @@ def test_stamps_follow_the_host_clock_with_the_microcontrollers_spacing():
     restarted = lockstep.update(Measurement(1, 0.001, 2.0, 0.0, 0.31, 0.1))
     assert len(restarted) == 1 and restarted[0].stamp == pytest.approx(2.0)
     assert lockstep.counters["reinitialisations"] == 1 and "clock went back" in lockstep.last_problem
+
+
+def _stamp_errors(est, packets):
+    """(receive time, stamp - the sample's true host instant) of each packet (sequence, mcu time,
+    true host instant of sampling, receive time), in order."""
+    errors = []
+    for sequence, mcu, sampled, received in packets:
+        errors.append((received, est.update(Measurement(sequence, mcu, received, 0.0, 0.3, 0.1))[-1].stamp - sampled))
+    return errors
+
+
+def test_stamps_follow_a_simulated_robot_that_skipped_time():
+    """Issue 29: the simulated robot, stalled beyond sim/runner.py's RESYNC_LATENESS, drops the time
+    it missed: its microcontroller clock then runs 80 ms behind the host clock for good, and every
+    packet arrives 80 ms after its instant on the old mapping. The stamps must follow within
+    clock_max_error (a few ms) once clock_reanchor_after of packets showed it, not drift 0.5 ms/s."""
+    s = CONFIG.estimator
+    est = estimator()
+    skip = 0.08
+    packets = [(i, 1.0 + i * PERIOD, 5.0 + i * PERIOD, 5.0 + i * PERIOD + 3e-4) for i in range(1000)]
+    packets += [(i, 1.0 + i * PERIOD, 5.0 + skip + i * PERIOD, 5.0 + skip + i * PERIOD + 3e-4) for i in range(1000, 2000)]
+    errors = _stamp_errors(est, packets)
+    resumed = 5.0 + skip + 1.0
+    assert max(abs(e) for _, e in errors[100:1000]) < 1e-3
+    settled = [e for received, e in errors if received >= resumed + 0.1]
+    assert max(abs(e) for e in settled) <= 0.005                      # "a few ms" within 0.1 s
+    assert s.clock_max_error <= 0.005 and s.clock_reanchor_after <= 0.1
+    settled = [e for received, e in errors if received >= resumed + s.clock_reanchor_after + 2 * PERIOD]
+    assert len(settled) > 900 and max(abs(e) for e in settled) <= s.clock_max_error
+    assert est.clock.anchors == 2
+    # the stamps keep the microcontroller's spacing but for the one step of the re-anchor
+    stamps = np.array([e for _, e in errors]) + np.array([p[2] for p in packets])
+    assert np.sum(np.abs(np.diff(stamps) - PERIOD) > 1e-6) == 1
+
+
+def test_stamps_do_not_stay_ahead_when_the_first_packets_came_late():
+    """Issue 29: the first packets of a run arrive 40 ms late (a burst at start-up), the rest on time.
+    Anchored on the first, the stamps ran 40 ms ahead for 80 s (the offset may only fall 0.5 ms/s):
+    the driver then held every stance ramp. A packet earlier than the mapping allows proves it
+    wrong: within clock_reanchor_after the stamps must be within clock_max_error."""
+    s = CONFIG.estimator
+    est = estimator()
+    late = [(i, 1.0 + i * PERIOD, 5.0 + i * PERIOD, 5.04 + i * 1e-5) for i in range(40)]
+    on_time = [(i, 1.0 + i * PERIOD, 5.0 + i * PERIOD, 5.0 + i * PERIOD + 3e-4) for i in range(40, 2000)]
+    errors = _stamp_errors(est, late + on_time)
+    assert errors[0][1] == pytest.approx(0.04, abs=1e-3)            # nothing better was known then
+    assert max(abs(e) for received, e in errors if received >= 5.14) <= 0.005    # within 0.1 s
+    settled = [e for received, e in errors if received >= 5.04 + s.clock_reanchor_after + 2 * PERIOD]
+    assert len(settled) > 1800 and max(abs(e) for e in settled) <= s.clock_max_error
+
+
+def test_a_lockstep_stream_and_a_host_stall_keep_the_mapping():
+    """What must not re-anchor: a stream faster than real time (sim_robot in lockstep: the stamps run
+    ahead, spaced as the microcontroller's) and a burst of packets queued while the host stalled
+    longer than clock_reanchor_after (late, but read in a few ms: the next ones are on time)."""
+    s = CONFIG.estimator
+    lockstep = estimator()
+    stamps = [lockstep.update(measurement(i, 0.3, received=1.0 + i * PERIOD / 5))[-1].stamp for i in range(3000)]
+    assert np.allclose(np.diff(stamps), PERIOD, rtol=1e-3) and lockstep.clock.anchors == 1
+    stall = 3 * s.clock_reanchor_after + 0.05
+    burst = int(stall / PERIOD)
+    packets = [(i, 1.0 + i * PERIOD, 5.0 + i * PERIOD, 5.0 + i * PERIOD + 3e-4) for i in range(500)]
+    packets += [(i, 1.0 + i * PERIOD, 5.0 + i * PERIOD, 5.0 + 500 * PERIOD + stall + (i - 500) * 1e-5)
+                for i in range(500, 500 + burst)]
+    packets += [(i, 1.0 + i * PERIOD, 5.0 + i * PERIOD, 5.0 + i * PERIOD + 3e-4) for i in range(500 + burst, 1500)]
+    realtime = estimator()
+    errors = _stamp_errors(realtime, packets)
+    assert realtime.clock.anchors == 1 and max(abs(e) for _, e in errors[100:]) < 1e-3
