@@ -62,6 +62,37 @@ from .units import DriveUnits
 
 RAMP_RESTAMP = 0.0005   # [s] a MODE_RAMP stamp moved by more than this re-anchors the running ramp (repeats of
                         #   one stamp differ by the command's transit jitter only)
+SILENT_SYNCS = 2        # this many SYNCs in a row the drive left unanswered: it is not running (the simulated
+                        #   robot's process stalled): a running ramp is held until it answers again
+
+
+class GapHistogram:
+    """Time between consecutive valid commands, as the driver received them: a histogram of
+    `BIN` wide bins up to `LIMIT` (longer ones in the last) and the longest, for the command stream's
+    p99 and max in the diagnostics (the watchdog trips at command_timeout)."""
+
+    BIN, LIMIT = 0.0005, 0.2   # [s]
+
+    def __init__(self) -> None:
+        self.counts = [0] * (int(round(self.LIMIT / self.BIN)) + 1)
+        self.total = 0
+        self.max = 0.0
+
+    def add(self, gap: float) -> None:
+        self.counts[min(int(gap / self.BIN), len(self.counts) - 1)] += 1
+        self.total += 1
+        self.max = max(self.max, gap)
+
+    def quantile(self, fraction: float) -> float:
+        """The upper edge of the bin holding the `fraction` quantile [s] (NaN without gaps)."""
+        if not self.total:
+            return math.nan
+        rank, seen = fraction * self.total, 0
+        for index, count in enumerate(self.counts):
+            seen += count
+            if seen >= rank:
+                return min((index + 1) * self.BIN, self.max)
+        return self.max
 
 
 class Phase(str, Enum):
@@ -138,6 +169,7 @@ class MotorDriver:
         self._current_ma = 0                # its drive setpoints
         self._position_qc = 0
         self._last_command: float | None = None
+        self.command_gaps = GapHistogram()
         self._want_enabled = False
         self._quick_stop = False
         self._watchdog_at = -math.inf       # when the command watchdog last tripped
@@ -151,6 +183,8 @@ class MotorDriver:
         self._last_rpdo_time = -math.inf
         self._tpdo_seen = 0                 # TPDOs received since the last SYNC (bit n-1: TPDO n)
         self._sync_outstanding = False
+        self._silent_syncs = 0              # SYNCs in a row the drive has not answered
+        self._last_cycle = now
         self._next_master_heartbeat = now
         self._nmt_start_sent_at = -math.inf
         # start-up / shutdown sequence
@@ -179,6 +213,8 @@ class MotorDriver:
             self._event(WARN, f"rejected motor command: mode {mode}, setpoint {setpoint!r}", key="rejected")
             return False
         self.counters["commands_received"] += 1
+        if self._last_command is not None:
+            self.command_gaps.add(now - self._last_command)
         self._last_command = now
         self._mode = mode
         if mode == MODE_DISABLED:
@@ -235,6 +271,11 @@ class MotorDriver:
         self._trip_watchdog(now)
         if self._sync_outstanding and self._tpdo_seen != (1 << len(TPDO_MAPPINGS)) - 1:
             self.counters["tpdo_missed"] += 1
+            self._silent_syncs += 1
+        else:
+            self._silent_syncs = 0
+        self._hold_ramp(now)
+        self._last_cycle = now
         self._send_rpdo(now, force=False)
         self._sent_since_sync = None
         self._tpdo_seen = 0
@@ -537,6 +578,15 @@ class MotorDriver:
             self._event(ERROR, f"fault reset failed after {self._reset.edges} attempts: "
                                "command disable to try again", key="reset_failed")
         return word
+
+    def _hold_ramp(self, now: float) -> None:
+        """A running ramp is the robot's: while the drive answers no SYNC (SILENT_SYNCS in a row: it,
+        or the simulated robot's process, is not running) the robot does not move on either, so the
+        ramp waits (its start moves with the clock) instead of running out in a stance that is frozen."""
+        if self._silent_syncs >= SILENT_SYNCS and self._ramp is not None and now > self._ramp[2]:
+            tau_0, duration, start, stamp = self._ramp
+            self._ramp = (tau_0, duration, start + (now - self._last_cycle), stamp)
+            self.counters["ramp_held_syncs"] += 1
 
     def _ramp_torque(self, now: float) -> float:
         tau_0, duration, start, _ = self._ramp
