@@ -160,3 +160,26 @@ def test_controller_stops_on_its_own_motor_drivers_error_only(rclpy_session, hop
         assert node_process.wait() == 0
         executor.shutdown()
         node.destroy_node()
+
+
+def test_a_warning_after_an_error_does_not_kill_the_controller(rclpy_session):
+    """Issue 29, in-process: under load the drive's start-up timed out once (the motor driver's ERROR:
+    the controller logged it as an error), and the first infeasible stride's warning then came from
+    the same logging line: rclpy raised "Logger severity cannot be changed between calls", the
+    controller died and the robot fell."""
+    from hopper_ros.msg import ApexState
+    from hopper_ros.nodes.deadbeat_controller import DeadbeatControllerNode
+    from hopper_ros.nodes.diagnostics import ERROR, diagnostic_array, diagnostic_status
+
+    node = DeadbeatControllerNode()
+    try:
+        node._on_setpoint(ApexState(apex_height=0.39, forward_speed=2.0))
+        node._on_diagnostics(diagnostic_array(time.time(), [diagnostic_status(
+            "/motor_driver", {}, {}, "drive start-up failed: SDO 0x1016:01 timed out", ERROR)]))
+        assert node.policy.counters["faults"] == 1
+        node._on_apex(ApexState(stride_index=1, apex_height=0.02, forward_speed=9.0))     # out of reach
+        assert node.policy.counters["infeasible"] == 1
+        node._on_apex(ApexState(stride_index=2, apex_height=0.39, forward_speed=2.0))    # and on it goes
+        assert node.policy.counters["strides"] == 2 and node.policy.last_decision.feasible
+    finally:
+        node.destroy_node()

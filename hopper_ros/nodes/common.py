@@ -46,6 +46,19 @@ def read_only_parameters(node) -> Callable[[str, Any, str], Any]:
         name, default, ParameterDescriptor(description=text, read_only=True)).value
 
 
+def log_event(logger, level: str, text: str) -> None:
+    """Log `text` at `level` ("info", "warning", "error"). One call site per level: rclpy ties each
+    call site to the severity of its first call and raises ValueError on another ("Logger severity
+    cannot be changed between calls"): `getattr(logger, level)(text)` on one line crashed the
+    controller the first time a warning followed an error (issue 29: the robot fell)."""
+    if level == "error":
+        logger.error(text)
+    elif level == "warning":
+        logger.warning(text)
+    else:
+        logger.info(text)
+
+
 def sensing_parameters(node):
     """The sensing nodes' shared parameters: (`param` as `read_only_parameters`, the sensing config of
     `sensing_file`, the diagnostics period: `diagnostics_period`, or the sensing file's when 0)."""

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
@@ -46,8 +47,9 @@ from hopper_ros.control.config import load_control
 from hopper_ros.control.deadbeat import DeadbeatController, StrideDecision
 from hopper_ros.control.stride_machine import Phase
 from hopper_ros.control.stride_policy import StridePolicy
+from hopper_ros.gaps import GapHistogram
 from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
-from hopper_ros.nodes.common import read_only_parameters, run_node
+from hopper_ros.nodes.common import log_event, read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import (DIAGNOSTICS_TOPIC, ERROR, OK, WARN, DiagnosticsReporter, level_of,
                                           split_node_name)
 from hopper_ros.nodes.stamps import to_seconds, to_stamp
@@ -95,6 +97,8 @@ class DeadbeatControllerNode(Node):
         self.create_timer(1.0, self._report)
         self.create_timer(keep_alive, self._send)
         self._command = MotorCommand()
+        self.published_gaps = GapHistogram()       # the command stream as this node sends it
+        self._published = math.nan
         s = self.controller.settings
         self.get_logger().info(
             f"{self.experiment}: predictor {s.predictor}, adaptation {'on' if s.adaptation else 'off'}, model {model_file}")
@@ -146,8 +150,12 @@ class DeadbeatControllerNode(Node):
             msg.header.stamp = command.stamp if command.stamp is not None else to_stamp(command.time)
             msg.mode, msg.setpoint, msg.duration = command.mode, command.setpoint, command.duration
             self._command_pub.publish(msg)
+            published = time.monotonic()
+            if self._published == self._published:
+                self.published_gaps.add(published - self._published)
+            self._published = published
         for level, text in self.policy.drain_events():
-            getattr(self.get_logger(), level)(text)
+            log_event(self.get_logger(), level, text)
 
     def _publish_decision(self, decision: StrideDecision) -> None:
         msg = StrideCommand()
@@ -166,7 +174,8 @@ class DeadbeatControllerNode(Node):
         decision, policy = self.policy.last_decision, self.policy
         values = {"bias_height_m": self.controller.bias_height, "bias_speed_m_s": self.controller.bias_speed,
                   "decision_time_s": decision.first_compute_time if decision else math.nan,
-                  "refine_time_s": decision.compute_time if decision else math.nan}
+                  "refine_time_s": decision.compute_time if decision else math.nan,
+                  "command_gap_p99_s": self.published_gaps.quantile(0.99), "command_gap_max_s": self.published_gaps.max}
         safe = policy.phase is Phase.SAFE
         self._diagnostics.report(policy.counters, values, policy.machine.reason if safe else "", WARN if safe else OK)
 

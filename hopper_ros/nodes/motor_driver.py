@@ -134,10 +134,13 @@ class MotorDriverNode(Node):
             level, message = self._driver.health()
             counters = [self._driver.counters[name] for name in COUNTER_NAMES]
             status = self._driver.status
-            values = [self._driver.settings.command_timeout, status.current, status.position]
+            gaps = self._driver.command_gaps
+            values = [self._driver.settings.command_timeout, status.current, status.position, gaps.quantile(0.99),
+                      gaps.max]
         self._diagnostics.report(
             {**dict(zip(COUNTER_NAMES, counters)), "cycle_overruns": self._loop.overruns},
-            dict(zip(["command_timeout_s", "current_a", "position_rad", "cycle_rate_hz"], [*values, self._loop.rate])),
+            dict(zip(["command_timeout_s", "current_a", "position_rad", "command_gap_p99_s", "command_gap_max_s",
+                      "cycle_rate_hz"], [*values, self._loop.rate])),
             message, {INFO: diagnostics.OK, WARN: diagnostics.WARN, ERROR: diagnostics.ERROR}[level])
 
     def _log(self, events) -> None:

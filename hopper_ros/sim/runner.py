@@ -59,7 +59,7 @@ class SimRunner:
         self._udp.bind(("127.0.0.1", 0))            # a sender on loopback only, not on 0.0.0.0
         port = udp_port if udp_port is not None else hardware.microcontroller.port
         self.udp_address = ("127.0.0.1", int(port))
-        self.counters = {"periods": 0, "deadline_misses": 0, "udp_errors": 0, "falls": 0, "strides": 0,
+        self.counters = {"periods": 0, "deadline_misses": 0, "resyncs": 0, "udp_errors": 0, "falls": 0, "strides": 0,
                          "throws": 0}          # falls, strides: counted by the caller, from the samples' events
         self._lock = threading.Lock()
         self._pending_throw = None
@@ -126,5 +126,6 @@ class SimRunner:
                     time.sleep(wait)
                 else:
                     self.counters["deadline_misses"] += 1
-                    if wait < -RESYNC_LATENESS:
+                    if wait < -RESYNC_LATENESS:     # the time missed is skipped: the robot was frozen
                         deadline = time.monotonic()
+                        self.counters["resyncs"] += 1

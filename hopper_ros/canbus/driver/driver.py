@@ -50,6 +50,7 @@ from hopper_ros.canbus.master import (
     nmt_state_name,
     sync_frame,
 )
+from hopper_ros.gaps import GapHistogram
 from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.physics.laws import ramp_torque
 
@@ -62,37 +63,8 @@ from .units import DriveUnits
 
 RAMP_RESTAMP = 0.0005   # [s] a MODE_RAMP stamp moved by more than this re-anchors the running ramp (repeats of
                         #   one stamp differ by the command's transit jitter only)
-SILENT_SYNCS = 2        # this many SYNCs in a row the drive left unanswered: it is not running (the simulated
+SILENT_SYNCS = 5        # this many SYNCs in a row the drive left unanswered: it is not running (the simulated
                         #   robot's process stalled): a running ramp is held until it answers again
-
-
-class GapHistogram:
-    """Time between consecutive valid commands, as the driver received them: a histogram of
-    `BIN` wide bins up to `LIMIT` (longer ones in the last) and the longest, for the command stream's
-    p99 and max in the diagnostics (the watchdog trips at command_timeout)."""
-
-    BIN, LIMIT = 0.0005, 0.2   # [s]
-
-    def __init__(self) -> None:
-        self.counts = [0] * (int(round(self.LIMIT / self.BIN)) + 1)
-        self.total = 0
-        self.max = 0.0
-
-    def add(self, gap: float) -> None:
-        self.counts[min(int(gap / self.BIN), len(self.counts) - 1)] += 1
-        self.total += 1
-        self.max = max(self.max, gap)
-
-    def quantile(self, fraction: float) -> float:
-        """The upper edge of the bin holding the `fraction` quantile [s] (NaN without gaps)."""
-        if not self.total:
-            return math.nan
-        rank, seen = fraction * self.total, 0
-        for index, count in enumerate(self.counts):
-            seen += count
-            if seen >= rank:
-                return min((index + 1) * self.BIN, self.max)
-        return self.max
 
 
 class Phase(str, Enum):
