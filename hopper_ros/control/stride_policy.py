@@ -43,6 +43,8 @@ class StrideSettings:
     ramp_ahead: bool = False            # send the ramp at pre-touchdown, stamped with the predicted touchdown
     touchdown_grace: float = 0.02       # [s] no touchdown this long after the predicted one: ramp cancelled
     keep_alive: float = 0.003           # [s] an unchanged command is repeated this often
+    executor_timeout: float = 0.02      # [s] the node's executor silent this long: its repeats stop (stale state)
+    keep_alive_priority_boost: int = 10  # SCHED_FIFO priority of the node's repeating thread above its own
     brake_disable_delay: float = 0.5    # [s] single stride: braking this long, then the drive disabled
 
     @classmethod

@@ -12,7 +12,7 @@ to check the loop end to end (signs, units, timing) and by the benchmarks.
 The host clock: the packet sampled at simulated time t reaches the sensing chain at host time
 t + `host_delay(t)` (default 0; non-decreasing in t + delay). The controller and the motor driver's
 command ages run on it, as the nodes run on the host's clock: a step of the delay is the simulated
-robot skipping time (stalled beyond sim/runner.py's RESYNC_LATENESS), a large delay of the first
+robot skipping time (stalled beyond sim/runner.py's RESYNC_PERIODS), a large delay of the first
 packets a late start (issue 29). `GraphRun.stances` is the stance ramp as the leg felt it.
 """
 

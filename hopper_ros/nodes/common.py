@@ -8,7 +8,9 @@ A node module defines its `rclpy.node.Node` subclass (a thin adapter over a plai
 `run_node` applies the ROS environment (loopback-only discovery unless the user chose a range),
 initialises rclpy with `args` (None: `sys.argv`, so `--ros-args ...` work as with `ros2 run`),
 puts the process on SCHED_FIFO when HOPPER_REALTIME_PRIORITY asks (hopper_ros.environment),
-builds the node, logs its startup (pid, domain id, discovery range; scheduling) and spins it on rclpy's
+builds the node, logs its startup (pid, domain id, discovery range; scheduling), freezes the start-up's
+objects for the garbage collector (gc.freeze: a full collection walked all of them, a 50 ms pause of
+every thread; a pause over GC_PAUSE_WARNING is logged) and spins it on rclpy's
 EventsExecutor (HOPPER_EXECUTOR=single: the SingleThreadedExecutor). The events executor costs a
 fraction of the CPU per message: measured on the demo graph at 1 kHz, 150 % of a core in all
 instead of 190 %, the event detector and the controller at 13 % instead of 30 %. It has no guard
@@ -24,6 +26,7 @@ import gc
 import os
 import signal
 import sys
+import time
 import traceback
 from typing import Any, Callable, Sequence
 
@@ -36,6 +39,33 @@ _EVENTS_SPIN_PERIOD = 0.1  # [s] with the events executor (no guard conditions):
 
 
 _ACTIVE_STOP: StopSignals | None = None
+GC_PAUSE_WARNING = 0.005  # [s] a garbage collection longer than this is logged (it holds every thread of the node)
+
+
+class GcPauses:
+    """The garbage collector's pauses (gc.callbacks): the longest since `take()`. Python's full
+    collection walks every object of the process, ~50 ms in a node (rclpy, numpy, scipy, the
+    model), more in a container: it stops every thread, the 1 kHz loop and the command stream with
+    it. run_node freezes the objects of the start-up (gc.freeze) so that it walks only the few made
+    since (issue 29: such pauses made the motor command stream's 20 ms gaps)."""
+
+    def __init__(self) -> None:
+        self.longest, self.generation = 0.0, -1
+        self._started = 0.0
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self._started = time.perf_counter()
+        else:
+            pause = time.perf_counter() - self._started
+            if pause > self.longest:
+                self.longest, self.generation = pause, info.get("generation", -1)
+
+    def take(self) -> tuple[float, int]:
+        """(the longest pause [s], its generation) since the last call."""
+        taken = self.longest, self.generation
+        self.longest, self.generation = 0.0, -1
+        return taken
 
 
 def read_only_parameters(node) -> Callable[[str, Any, str], Any]:
@@ -127,6 +157,7 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
     nodes, half_built = [], []
     executor = None
     status = 0
+    pauses = GcPauses()
     try:
         rclpy.init(args=list(args) if args is not None else None, signal_handler_options=SignalHandlerOptions.NO)
         if stop.received is None:
@@ -143,10 +174,17 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
             node.get_logger().info(f"scheduling: {scheduling}")
             for each in nodes:
                 executor.add_node(each)
+            gc.collect()
+            gc.freeze()              # the start-up's objects are never walked again (GcPauses)
+            gc.callbacks.append(pauses)
             getattr(built, "spinning", lambda: None)()
+            logger = node.get_logger()
             while (stop.received is None and node.context.ok()
                    and not any(getattr(each, "finished", False) for each in nodes)):
                 executor.spin_once(timeout_sec=spin_period)
+                if pauses.longest > GC_PAUSE_WARNING:
+                    pause, generation = pauses.take()
+                    logger.warning(f"garbage collection (generation {generation}) held the node {pause * 1e3:.1f} ms")
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as exc:  # noqa: BLE001 - a node's failure is reported, then we clean up
@@ -162,6 +200,8 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
         if stop.received is not None and node is not None:
             node.get_logger().info(f"stopping on {signal.Signals(stop.received).name}")
         stop.detach()
+        if pauses in gc.callbacks:
+            gc.callbacks.remove(pauses)
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)
         for each in reversed(nodes):

@@ -1,5 +1,7 @@
 """The simulated robot run as the robot runs: its own thread steps the physics once per period
-(on the wall clock in `realtime` mode, as fast as it goes in `lockstep`), sends the
+(on the wall clock in `realtime` mode, as fast as it goes in `lockstep`; a stall of the process of more
+than RESYNC_PERIODS periods freezes the simulated world for its length, as the driver expects of a
+drive that answers no SYNC), sends the
 microcontroller's UDP packet to the encoder bridge on loopback and hands every period's sample to
 the caller (the sim_robot node publishes its force plate, truth and events). The emulated EPOS2
 sits on the CAN transport the `can` setting names, the motor driver's own selection
@@ -21,7 +23,9 @@ from .experiment import ExperimentSeries
 from .robot import SimRobot, SimSample
 
 MODES = ("realtime", "lockstep")
-RESYNC_LATENESS = 0.05     # [s] further behind than this, real-time mode stops catching up
+RESYNC_PERIODS = 4         # further behind than this many periods, real-time mode does not catch up: the time
+                           #   missed is skipped, the robot's world was frozen (issue 29: caught up, the backlog
+                           #   ran with the drive's last command: a stalled stance lost its ramp's torque)
 
 
 def open_drive(can_setting: str, hardware: HardwareConfig, port: int | None):
@@ -126,6 +130,6 @@ class SimRunner:
                     time.sleep(wait)
                 else:
                     self.counters["deadline_misses"] += 1
-                    if wait < -RESYNC_LATENESS:     # the time missed is skipped: the robot was frozen
+                    if wait < -RESYNC_PERIODS * period:     # the time missed is skipped: the robot was frozen
                         deadline = time.monotonic()
                         self.counters["resyncs"] += 1

@@ -63,8 +63,9 @@ from .units import DriveUnits
 
 RAMP_RESTAMP = 0.0005   # [s] a MODE_RAMP stamp moved by more than this re-anchors the running ramp (repeats of
                         #   one stamp differ by the command's transit jitter only)
-SILENT_SYNCS = 5        # this many SYNCs in a row the drive left unanswered: it is not running (the simulated
-                        #   robot's process stalled): a running ramp is held until it answers again
+SILENT_SYNCS = 3        # this many SYNCs in a row the drive left unanswered: it is not running (the simulated
+                        #   robot's process stalled: sim/runner.py RESYNC_PERIODS): a running ramp is held until it
+                        #   answers again
 
 
 class Phase(str, Enum):
@@ -150,7 +151,8 @@ class MotorDriver:
         self._last_cw: int | None = None                                  # fault found at start-up is reset
         # cyclic exchange
         self._sent_since_sync: tuple[int, bytes] | None = None
-        self._ramp: tuple[float, float, float, float] | None = None   # MODE_RAMP: (tau_0, duration, start, stamp)
+        # MODE_RAMP: (tau_0, duration, start, stamp, held): start = the stamp (or later) + the time it was held
+        self._ramp: tuple[float, float, float, float, float] | None = None
         self._last_rpdo: tuple[int, bytes] | None = None   # the last RPDO sent and when
         self._last_rpdo_time = -math.inf
         self._tpdo_seen = 0                 # TPDOs received since the last SYNC (bit n-1: TPDO n)
@@ -203,11 +205,12 @@ class MotorDriver:
                 if self._ramp is None or self._ramp[:2] != (setpoint, duration):
                     # anchored at its stamp (the touchdown, or one predicted ahead: zero current until
                     # then), unless the command came late: a ramp skipped is energy lost
-                    self._ramp = (setpoint, duration, max(stamp, now - self.settings.max_ramp_age), stamp)
+                    self._ramp = (setpoint, duration, max(stamp, now - self.settings.max_ramp_age), stamp, 0.0)
                 elif abs(stamp - self._ramp[3]) > RAMP_RESTAMP:
                     # the same ramp under a new stamp (the measured touchdown after a predicted one):
-                    # the running ramp moves to it
-                    self._ramp = (setpoint, duration, stamp, stamp)
+                    # the running ramp moves to it, still held as long as it was (_hold_ramp)
+                    held = self._ramp[4]
+                    self._ramp = (setpoint, duration, stamp + held, stamp, held)
                 self._current_ma = self._current_setting(self._ramp_torque(now))
             else:
                 self._position_qc = self._position_setting(setpoint)
@@ -556,12 +559,13 @@ class MotorDriver:
         or the simulated robot's process, is not running) the robot does not move on either, so the
         ramp waits (its start moves with the clock) instead of running out in a stance that is frozen."""
         if self._silent_syncs >= SILENT_SYNCS and self._ramp is not None and now > self._ramp[2]:
-            tau_0, duration, start, stamp = self._ramp
-            self._ramp = (tau_0, duration, start + (now - self._last_cycle), stamp)
+            tau_0, duration, start, stamp, held = self._ramp
+            pause = now - self._last_cycle
+            self._ramp = (tau_0, duration, start + pause, stamp, held + pause)
             self.counters["ramp_held_syncs"] += 1
 
     def _ramp_torque(self, now: float) -> float:
-        tau_0, duration, start, _ = self._ramp
+        tau_0, duration, start = self._ramp[:3]
         return ramp_torque(float(now - start), float(tau_0), float(duration))   # (2.32)
 
     def _rpdo_frame(self, number: int, controlword: int) -> can.Message:
