@@ -113,7 +113,7 @@ class DeadbeatControllerNode(Node):
         self._stale = False
         self.create_timer(self._executor_timeout / 4, self._tick)
         self._repeater = PeriodicThread(keep_alive, self._repeat, self.policy.settings.keep_alive_priority_boost,
-                                        "command-repeat", self._repeat_failed).start()
+                                        "command-repeat", self._repeat_failed)
         s = self.controller.settings
         self.get_logger().info(
             f"{self.experiment}: predictor {s.predictor}, adaptation {'on' if s.adaptation else 'off'}, model {model_file}")
@@ -159,6 +159,11 @@ class DeadbeatControllerNode(Node):
                 return
 
     # ------------------------------------------------------------------ the repeats
+    def spinning(self) -> None:
+        """Its executor runs (run_node, the container): the repeats begin."""
+        self._executor_seen = time.monotonic()
+        self._repeater.start()
+
     def _tick(self) -> None:
         """The executor runs: the repeats may go on."""
         self._executor_seen = time.monotonic()
