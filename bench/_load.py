@@ -1,7 +1,7 @@
 """Background load beside a run of the graph (bench_demo_load.py, soak.py): not a bench itself.
 
-`with Load(profile, stall_target=...) as load:` starts, in processes of their own (one process
-group, stopped on leaving):
+`with Load(profile, stall_target=...) as load:` starts, in processes of their own (one session and
+process group, as one job beside the demo; stopped on leaving):
 - `busy_per_core` x cores busy loops with normal scheduling (a CI job, a sweep beside the demo);
 - `realtime`: a second SCHED_FIFO process at (priority, burst, period): busy for a burst drawn from
   [burst / 2, burst] once per period (another real-time loop on the same PC);
@@ -13,6 +13,7 @@ Everything on this machine; nothing is sent anywhere.
 """
 from __future__ import annotations
 
+import json
 import os
 import random
 import signal
@@ -36,6 +37,13 @@ while True:
     while time.monotonic() < end:
         pass
     time.sleep(max(0.0, period - burst))
+"""
+
+_JOB = """
+import json, subprocess, sys, time
+children = [subprocess.Popen(argv) for argv in json.loads(sys.argv[1])]
+for child in children:
+    child.wait()
 """
 
 _WRITER = """
@@ -83,13 +91,21 @@ class Load:
         self.profile, self.stall_target, self.seed = profile, stall_target, seed
         self.stalls: list[float] = []
         self._processes: list[subprocess.Popen] = []
+        self._argvs: list[list[str]] = []
         self._stop = threading.Event()
         self._thread = None
         self._folder = None
 
     def _spawn(self, argv):
-        self._processes.append(subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                                stderr=subprocess.DEVNULL, start_new_session=True))
+        self._argvs.append(argv)
+
+    def _start_job(self):
+        """One session and process group for the whole load, as one job beside the demo (a CI run, a
+        sweep): with the kernel's autogroups a session shares the CPU with the others as one."""
+        if self._argvs:
+            self._processes.append(subprocess.Popen([sys.executable, "-c", _JOB, json.dumps(self._argvs)],
+                                                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                                    stderr=subprocess.DEVNULL, start_new_session=True))
 
     def __enter__(self):
         p = self.profile
@@ -102,6 +118,7 @@ class Load:
         if p.io_chunk_mb:
             self._folder = tempfile.mkdtemp(prefix="hopper_load_")
             self._spawn([sys.executable, "-c", _WRITER, str(p.io_chunk_mb), self._folder])
+        self._start_job()
         if p.stall:
             self._thread = threading.Thread(target=self._stall, name="stall", daemon=True)
             self._thread.start()
@@ -135,11 +152,12 @@ class Load:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(5.0)
-        for process in self._processes:
+        if self._processes:
             try:
-                os.killpg(process.pid, signal.SIGKILL)
+                os.killpg(self._processes[0].pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+        for process in self._processes:
             process.wait()
         if self._folder:
             for name in os.listdir(self._folder):

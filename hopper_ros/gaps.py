@@ -16,11 +16,18 @@ class GapHistogram:
         self.counts = [0] * (int(round(self.LIMIT / self.BIN)) + 1)
         self.total = 0
         self.max = 0.0
+        self.recent_max = 0.0      # the longest since `take_recent()`
 
     def add(self, gap: float) -> None:
         self.counts[min(int(gap / self.BIN), len(self.counts) - 1)] += 1
         self.total += 1
         self.max = max(self.max, gap)
+        self.recent_max = max(self.recent_max, gap)
+
+    def take_recent(self) -> float:
+        """The longest gap since the last call (a diagnostics period's) [s]."""
+        recent, self.recent_max = self.recent_max, 0.0
+        return recent
 
     def quantile(self, fraction: float) -> float:
         """The upper edge of the bin holding the `fraction` quantile [s] (NaN without gaps)."""

@@ -758,7 +758,7 @@ class Launcher:
             stderr=subprocess.PIPE,
             env=spec.env,
             cwd=spec.cwd,
-            start_new_session=True,  # own session and process group: no terminal signals, group kill
+            process_group=0,  # own process group (no terminal signals, group kill), in our session: one autogroup
             preexec_fn=_child_preexec(os.getpid()),
         )
         child = _Child(spec, process)
