@@ -104,3 +104,45 @@ def test_the_simulated_robot_frozen_in_a_stance(into_stance, length):
     assert_hops_as_unloaded(graph, run)
     if into_stance:
         assert graph.driver.counters["ramp_held_syncs"] >= round(length / HARDWARE.microcontroller.sample_period) - 4
+
+
+def test_sensing_that_stops_while_hopping_disables_the_drive():
+    """The sensing chain dies (the estimator or the detector killed, each a process of its own in
+    demo_500hz.launch.yaml): the controller's repeats go on and would hold the leg or run a ramp
+    scheduled from the last events, whatever the robot does. No gait event for sensing_timeout while
+    hopping: the drive is disabled (no torque from a stale state); events again (the node respawned,
+    the robot thrown): hopping resumes."""
+    from hopper_ros.canbus.epos2_objects import State
+    from hopper_ros.harness.graph_lockstep import GraphRun
+    from hopper_ros.sensing.pipeline import PipelineOutput
+
+    dead_from, dead_to = 1.6, 3.0
+    graph = GraphLockstep(load_sim_config(), HARDWARE, DeadbeatController(load_params(), CONTROL.deadbeat),
+                          driver_settings=DRIVER, stride_settings=CONTROL.stride)
+    process = graph.sensing.process
+    graph.sensing.process = lambda datagram, received: (PipelineOutput(None) if dead_from <= graph.robot.t < dead_to
+                                                         else process(datagram, received))
+    run, enabled = GraphRun(), []
+    try:
+        graph.set_setpoint(*SETPOINT)
+        graph.robot.throw(*SETPOINT, graph.controller.neutral_angle(SETPOINT[1]), lead_time=0.05, hold=True)
+        while graph.robot.t < 0.5:
+            graph.step(run)
+        graph.robot.plant.release()
+        while graph.robot.t < dead_to + 0.3:
+            graph.step(run)
+            enabled.append((graph.robot.t, graph.robot.drive.state is State.OPERATION_ENABLED))
+        assert graph.policy.counters["sensing_lost"] == 1
+        lost = dead_from + CONTROL.stride.sensing_timeout
+        assert all(on for t, on in enabled if t < dead_from)
+        assert not any(on for t, on in enabled if lost + 0.01 <= t < dead_to), "the drive stayed enabled, blind"
+        # the chain back (respawned), the robot thrown again: the strides resume
+        hopped = len(run.true_apexes)
+        graph.robot.throw(*SETPOINT, graph.controller.neutral_angle(SETPOINT[1]), lead_time=0.05)
+        fell = run.fell
+        while len(run.true_apexes) < hopped + 6 and graph.robot.t < dead_to + 6.0:
+            graph.step(run)
+        assert not graph.policy.sensing_lost and len(run.true_apexes) >= hopped + 6
+        assert abs(run.true_apexes[-1][1] - SETPOINT[0]) < 0.005 and not graph.robot.plant.fallen, (fell, run.true_apexes[-3:])
+    finally:
+        graph.close()

@@ -98,8 +98,7 @@ class GraphLockstep:
         output = self.sensing.process(packet_format.encode(sample.packet), self.host_time)
         for event in output.events:
             self._on_event(event, run)
-        if output.estimates:                    # the node's keep-alive timer, here at every estimate
-            self._command()
+        self._command()                          # the node's repeats: a thread of their own, every period here
         self._cycle()
 
     def _command(self) -> None:
@@ -115,6 +114,7 @@ class GraphLockstep:
             self.driver.handle(frame)
 
     def _on_event(self, event, run: GraphRun) -> None:
+        self.policy.on_sensing(self.host_time)
         state = event.state
         if event.kind is EventType.APEX:
             run.apexes.append((event.time, state.z, state.y_dot))

@@ -57,7 +57,7 @@ from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
 from hopper_ros.nodes.common import log_event, read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import (DIAGNOSTICS_TOPIC, ERROR, OK, WARN, DiagnosticsReporter, level_of,
                                           split_node_name)
-from hopper_ros.nodes.stamps import to_seconds, to_stamp
+from hopper_ros.nodes.stamps import now_seconds, to_seconds, to_stamp
 
 SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -131,6 +131,7 @@ class DeadbeatControllerNode(Node):
 
     def _on_apex(self, msg: ApexState) -> None:
         with self._lock:
+            self.policy.on_sensing(now_seconds(self))
             decision = self.policy.on_apex(msg.apex_height, msg.forward_speed, msg.stride_index)
             if decision is not None:
                 self._publish_decision(decision)
@@ -139,6 +140,7 @@ class DeadbeatControllerNode(Node):
     def _on_event(self, msg: GaitEvent) -> None:
         when, s = to_seconds(msg.header.stamp), msg.state
         with self._lock:
+            self.policy.on_sensing(now_seconds(self))
             if msg.type == GaitEvent.PRE_TOUCHDOWN:
                 self.policy.on_pre_touchdown(when, s.z, s.z_dot, s.leg_angle, s.leg_angle_rate)
             elif msg.type == GaitEvent.TOUCHDOWN:
