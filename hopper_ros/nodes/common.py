@@ -7,8 +7,9 @@ A node module defines its `rclpy.node.Node` subclass (a thin adapter over a plai
 
 `run_node` applies the ROS environment (loopback-only discovery unless the user chose a range),
 initialises rclpy with `args` (None: `sys.argv`, so `--ros-args ...` work as with `ros2 run`),
-puts the process on SCHED_FIFO when HOPPER_REALTIME_PRIORITY asks (hopper_ros.environment),
-builds the node, logs its startup (pid, domain id, discovery range; scheduling), freezes the start-up's
+builds the node (with normal scheduling: a respawned node's start-up must not starve the running
+loop), puts every thread of the process on SCHED_FIFO when HOPPER_REALTIME_PRIORITY asks
+(hopper_ros.environment), logs its startup (pid, domain id, discovery range; scheduling), freezes the start-up's
 objects for the garbage collector (gc.freeze: a full collection walked all of them, a 50 ms pause of
 every thread; a pause over GC_PAUSE_WARNING is logged) and spins it on rclpy's
 EventsExecutor (HOPPER_EXECUTOR=single: the SingleThreadedExecutor). The events executor costs a
@@ -16,7 +17,7 @@ fraction of the CPU per message: measured on the demo graph at 1 kHz, 150 % of a
 instead of 190 %, the event detector and the controller at 13 % instead of 30 %. It has no guard
 conditions, so a stop signal is seen within `_EVENTS_SPIN_PERIOD`. SIGINT and SIGTERM both end the spin (unless the parent process had
 set them to be ignored), and so does a node setting its attribute `finished` (its work is done;
-seen at the next wake-up of the executor); the node is destroyed, rclpy shut down and 0 returned. A node that cannot start (bad configuration) or whose callback raises makes
+seen at the next wake-up of the executor; with `failed` set too, the status is 1); the node is destroyed, rclpy shut down and 0 returned. A node that cannot start (bad configuration) or whose callback raises makes
 it return 1.
 """
 
@@ -31,7 +32,7 @@ import traceback
 from typing import Any, Callable, Sequence
 
 from hopper_ros.environment import (RosEnvironmentError, apply_realtime_priority, apply_ros_environment,
-                                    dds_network)
+                                    dds_network, realtime_priority)
 from hopper_ros.nodes.signals import StopSignals
 
 _SPIN_PERIOD = 1.0  # [s] the executor wakes at least this often (belt and braces, see StopSignals)
@@ -140,7 +141,7 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
     `spinning()`, if any, is called once they are added)."""
     try:
         apply_ros_environment()
-        scheduling = apply_realtime_priority()   # before rclpy: its threads inherit the policy
+        realtime_priority()          # checked now; applied once the node is built (below)
     except RosEnvironmentError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -171,12 +172,15 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
                 f"started: pid {os.getpid()}, ROS_DOMAIN_ID {node.context.get_domain_id()}, "
                 f"discovery range {dds_network()}"
             )
-            node.get_logger().info(f"scheduling: {scheduling}")
             for each in nodes:
                 executor.add_node(each)
             gc.collect()
             gc.freeze()              # the start-up's objects are never walked again (GcPauses)
             gc.callbacks.append(pauses)
+            # SCHED_FIFO only now, for every thread there (rclpy's, DDS's, the node's; later ones inherit it):
+            # the imports and construction (a second of CPU) ran with normal scheduling. A node respawned
+            # at FIFO priority starved the running loop of the same or lower priority while it started
+            node.get_logger().info(f"scheduling: {apply_realtime_priority()}")
             getattr(built, "spinning", lambda: None)()
             logger = node.get_logger()
             while (stop.received is None and node.context.ok()
@@ -199,6 +203,8 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
     finally:
         if stop.received is not None and node is not None:
             node.get_logger().info(f"stopping on {signal.Signals(stop.received).name}")
+        if any(getattr(each, "failed", False) for each in nodes):
+            status = 1               # ended by itself, but not because its work was done
         stop.detach()
         if pauses in gc.callbacks:
             gc.callbacks.remove(pauses)

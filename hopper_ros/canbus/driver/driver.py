@@ -68,6 +68,24 @@ SILENT_SYNCS = 3        # this many SYNCs in a row the drive left unanswered: it
                         #   answers again
 
 
+def connection_closed(exc: BaseException) -> bool:
+    """Whether a bus error is the transport's connection closed by its other end (a socketcand hub
+    that went away: reset, broken pipe): no later frame will pass, unlike a CAN error."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, (ConnectionResetError, BrokenPipeError, ConnectionAbortedError)):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def first_line(exc: BaseException) -> str:
+    """An exception's message without the traceback some python-can errors carry in it."""
+    text = str(exc).strip()
+    return text.split("Traceback (most recent call last)")[0].strip().splitlines()[0] if text else type(exc).__name__
+
+
 class Phase(str, Enum):
     STARTING = "starting"       # start-up sequence (NMT, SDO configuration) in progress
     RUNNING = "running"         # operational: SYNC, PDOs, state machine
@@ -143,6 +161,7 @@ class MotorDriver:
         self._position_qc = 0
         self._last_command: float | None = None
         self.command_gaps = GapHistogram()
+        self.transport_lost = False         # the connection to the bus closed for good (the socketcand hub went away)
         self._want_enabled = False
         self._quick_stop = False
         self._watchdog_at = -math.inf       # when the command watchdog last tripped
@@ -510,13 +529,15 @@ class MotorDriver:
         try:
             self.bus.send(frame, timeout=self.settings.sync_period)
         except (can.CanError, OSError) as exc:
-            self._bus_error(self.clock(), f"send of 0x{frame.arbitration_id:03X} failed: {exc}")
+            self.transport_lost = self.transport_lost or connection_closed(exc)
+            self._bus_error(self.clock(), f"send of 0x{frame.arbitration_id:03X} failed: {first_line(exc)}")
             return False
         self.counters["frames_sent"] += 1
         return True
 
-    def bus_error(self, text: str) -> None:
+    def bus_error(self, text: str, exc: BaseException | None = None) -> None:
         """Report a bus failure the caller saw (e.g. receiving failed): counted, drive disabled."""
+        self.transport_lost = self.transport_lost or (exc is not None and connection_closed(exc))
         self._bus_error(self.clock(), text)
 
     def _bus_error(self, now: float, text: str) -> None:
