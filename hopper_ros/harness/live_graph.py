@@ -92,10 +92,16 @@ class LiveGraph:
         self.executor.add_node(self.node)
         seen = self.seen
 
+        reported = {"falls": 0, "base": 0}
+
         def on_diagnostics(msg):
             for status in msg.status:
                 if split_node_name(status.name) == ("/", "sim_robot"):
-                    seen["falls"] = status_values(status).get("falls", seen["falls"])
+                    falls = status_values(status).get("falls", reported["falls"])
+                    if falls < reported["falls"]:          # a new robot (respawned): its count starts again
+                        reported["base"] += reported["falls"]
+                    reported["falls"] = falls
+                    seen["falls"] = reported["base"] + falls
 
         def on_apex(msg):
             seen["apexes"] += 1
