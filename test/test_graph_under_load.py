@@ -12,6 +12,7 @@ import pytest
 
 from hopper_ros.canbus.driver import load_motor_driver
 from hopper_ros.control.config import load_control
+from hopper_ros.control.stride_machine import Phase
 from hopper_ros.control.deadbeat import DeadbeatController
 from hopper_ros.hardware.config import load_hardware
 from hopper_ros.harness.graph_lockstep import GraphLockstep
@@ -20,13 +21,13 @@ from hopper_ros.sim.config import load_sim_config
 
 HARDWARE = load_hardware()
 CONTROL = load_control()
-DRIVER = load_motor_driver().driver
+DRIVER = load_motor_driver("demo/motor_driver.yaml").driver   # the demo's (launch/demo*.launch.yaml)
 SETPOINT = (0.39, 2.0)
 STRIDES = 8
 
 
 def run_graph(host_delay=lambda t: 0.0, graph_hook=None):
-    """The demo's loop (control.yaml, motor_driver.yaml) for STRIDES strides at SETPOINT."""
+    """The demo's loop (control.yaml, demo/motor_driver.yaml) for STRIDES strides at SETPOINT."""
     graph = GraphLockstep(load_sim_config(), HARDWARE, DeadbeatController(load_params(), CONTROL.deadbeat),
                           driver_settings=DRIVER, stride_settings=CONTROL.stride, host_delay=host_delay)
     if graph_hook is not None:
@@ -77,8 +78,8 @@ def test_late_first_packets():
     assert graph.sensing.estimator.clock.anchors == 2
 
 
-@pytest.mark.parametrize("into_stance,length", [(0.0, 0.08), (0.005, 0.08), (0.02, 0.08), (0.04, 0.08),
-                                                 (0.01, 0.01)])
+@pytest.mark.parametrize("into_stance,length", [(-0.005, 0.08), (0.0, 0.08), (0.005, 0.08), (0.02, 0.08),
+                                                 (0.04, 0.08), (0.01, 0.01)])
 def test_the_simulated_robot_frozen_in_a_stance(into_stance, length):
     """Cause 3: the simulated robot's process stops in a stance (and then skips that time: its world was
     frozen): the robot does not move, but the driver's ramp ran on on the host clock and was over
@@ -87,14 +88,17 @@ def test_the_simulated_robot_frozen_in_a_stance(into_stance, length):
     while the drive answers no SYNC. (Frozen at the touchdown itself, the touchdown is heard only
     after the freeze: the controller cancels the ramp 20 ms past the predicted touchdown and starts
     it again on the measured one.)"""
-    freeze = {"at": None, "touchdowns": 0, "contact": False}
+    freeze = {"at": None, "touchdowns": 0, "contact": False, "pre": 0}
 
     def hook(graph):
-        def host_delay(t):            # frozen from into_stance after the third touchdown on
+        def host_delay(t):            # frozen from into_stance after the third touchdown on (before: at pre-touchdown)
             contact = graph.robot.plant.in_contact
             freeze["touchdowns"] += contact and not freeze["contact"]
             freeze["contact"] = contact
-            if freeze["at"] is None and freeze["touchdowns"] == 3:
+            if freeze["at"] is None and into_stance < 0 and freeze["touchdowns"] == 2 and not contact \
+                    and graph.policy.phase is Phase.PRE_TOUCHDOWN:
+                freeze["at"] = t                  # between the pre-touchdown event and the touchdown
+            if freeze["at"] is None and into_stance >= 0 and freeze["touchdowns"] == 3:
                 freeze["at"] = t + into_stance
             return length if freeze["at"] is not None and t >= freeze["at"] else 0.0
         graph.host_delay = host_delay
@@ -102,7 +106,7 @@ def test_the_simulated_robot_frozen_in_a_stance(into_stance, length):
     graph, run = run_graph(graph_hook=hook)
     assert freeze["at"] is not None
     assert_hops_as_unloaded(graph, run)
-    if into_stance:
+    if into_stance > 0:
         assert graph.driver.counters["ramp_held_syncs"] >= round(length / HARDWARE.microcontroller.sample_period) - 4
 
 

@@ -179,13 +179,19 @@ def test_stamps_follow_the_host_clock_with_the_microcontrollers_spacing():
     stamps += [realtime.update(measurement(i, 0.3, received=resume + (i - 500) * 1e-6))[-1].stamp
                for i in range(500, 650)]
     assert np.allclose(np.diff(stamps), PERIOD, rtol=1e-3) and realtime.clock.anchors == 1
-    # the host clock stepped 0.2 s forward for good: re-anchored, to the least delay, after clock_reanchor_after
-    span = int(round(CONFIG.estimator.clock_reanchor_after / PERIOD))
-    step = [realtime.update(measurement(i, 0.3, received=1.2 + i * PERIOD + 3e-4))[-1].stamp
-            for i in range(650, 650 + span + 2)]
+    # the host clock stepped 0.2 s forward for good (no packet for 0.2 s, then late ones at their pace):
+    # re-anchored, to the least delay, by the second packet
+    step = [realtime.update(measurement(i, 0.3, received=1.2 + i * PERIOD + 3e-4))[-1].stamp for i in range(650, 660)]
     assert realtime.clock.anchors == 2
-    assert step[-1] == pytest.approx(1.2 + (650 + span + 1) * PERIOD + 3e-4)
-    assert step[span - 2] == pytest.approx(1.0 + (650 + span - 2) * PERIOD + 3e-4, abs=1e-3)
+    assert step[0] == pytest.approx(1.0 + 650 * PERIOD + 3e-4, abs=1e-3)           # nothing better known yet
+    assert step[1:] == pytest.approx([1.2 + i * PERIOD + 3e-4 for i in range(651, 660)])
+    # late packets without a silence before them (a standing queue) wait for clock_reanchor_after
+    span = int(round(CONFIG.estimator.clock_reanchor_after / PERIOD))
+    queued = [realtime.update(measurement(i, 0.3, received=1.205 + i * PERIOD + 3e-4))[-1].stamp
+              for i in range(660, 660 + span + 2)]
+    assert realtime.clock.anchors == 3
+    assert queued[span - 2] == pytest.approx(1.2 + (660 + span - 2) * PERIOD + 3e-4, abs=1e-3)
+    assert queued[-1] == pytest.approx(1.205 + (660 + span + 1) * PERIOD + 3e-4)
     # the microcontroller restarted (its clock back to the start): filter and mapping restart
     restarted = lockstep.update(Measurement(1, 0.001, 2.0, 0.0, 0.31, 0.1))
     assert len(restarted) == 1 and restarted[0].stamp == pytest.approx(2.0)
@@ -216,6 +222,8 @@ def test_stamps_follow_a_simulated_robot_that_skipped_time():
     assert max(abs(e) for _, e in errors[100:1000]) < 1e-3
     settled = [e for received, e in errors if received >= resumed + 0.1]
     assert max(abs(e) for e in settled) <= 0.005                      # "a few ms" within 0.1 s
+    # no packet for 80 ms, then late ones at their pace: right from the second on
+    assert max(abs(e) for _, e in errors[1001:]) <= s.clock_max_error
     assert s.clock_max_error <= 0.005 and s.clock_reanchor_after <= 0.1
     settled = [e for received, e in errors if received >= resumed + s.clock_reanchor_after + 2 * PERIOD]
     assert len(settled) > 900 and max(abs(e) for e in settled) <= s.clock_max_error

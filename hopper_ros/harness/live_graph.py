@@ -65,6 +65,7 @@ class LiveGraph:
         self.spy_from = float("inf")
         self._spy_port = 0
         self.seen = {"state": 0, "enabled": False, "status": 0, "falls": 0, "apexes": 0, "setpoint": None}
+        self.health: dict[str, dict] = {}                   # each node's last /diagnostics values
 
     # ------------------------------------------------------------------ lifetime
     def __enter__(self) -> "LiveGraph":
@@ -96,7 +97,10 @@ class LiveGraph:
 
         def on_diagnostics(msg):
             for status in msg.status:
-                if split_node_name(status.name) == ("/", "sim_robot"):
+                namespace, name = split_node_name(status.name)
+                if namespace == "/":
+                    self.health[name] = status_values(status)
+                if (namespace, name) == ("/", "sim_robot"):
                     falls = status_values(status).get("falls", reported["falls"])
                     if falls < reported["falls"]:          # a new robot (respawned): its count starts again
                         reported["base"] += reported["falls"]

@@ -203,8 +203,8 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
     finally:
         if stop.received is not None and node is not None:
             node.get_logger().info(f"stopping on {signal.Signals(stop.received).name}")
-        if any(getattr(each, "failed", False) for each in nodes):
-            status = 1               # ended by itself, but not because its work was done
+        if stop.received is None and any(getattr(each, "failed", False) for each in nodes):
+            status = 1               # ended by itself, but not because its work was done (nor asked to stop)
         stop.detach()
         if pauses in gc.callbacks:
             gc.callbacks.remove(pauses)

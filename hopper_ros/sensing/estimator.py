@@ -100,8 +100,10 @@ class ClockOffset:
     advancing more than `PACE` x the host's, plus `max_error`), so neither a burst of packets queued while the host stalled
     (late, but read within milliseconds; the next ones are on time) nor a lockstep simulation
     (faster than real time: its stamps run ahead, spaced as the microcontroller's) moves the
-    mapping. Before issue 29 only packets 0.1 s late for 1 s of microcontroller time re-anchored
-    it and only upwards: a simulated robot that skipped 50-150 ms left every stamp that much old
+    mapping. After a silence longer than `reanchor_after` (no packet at all: the simulated robot
+    stalled) two late packets arriving as far apart as they were sampled are enough: the stream goes
+    on at its pace, later by the time it missed. Before issue 29 only packets 0.1 s late for 1 s of
+    microcontroller time re-anchored it and only upwards: a simulated robot that skipped 50-150 ms left every stamp that much old
     for minutes (every stance ramp cancelled), late first packets left them ahead (every ramp held).
     """
 
@@ -118,17 +120,26 @@ class ClockOffset:
         self._side = 0                           # +1: packets late, -1: envelope early, beyond max_error
         self._since = (0.0, 0.0)                 # (mcu, receive time) of the span's first packet
         self._least = math.inf                   # the span's least delay
+        self._last_receive = 0.0
+        self._after_silence: float | None = None  # delay of a late packet that ended a silence
 
     def update(self, mcu_time: float, receive_time: float) -> float:
         delay = receive_time - mcu_time
         if self._last_mcu is None:
             self._anchor(delay)
-            self._last_mcu = mcu_time
+            self._last_mcu, self._last_receive = mcu_time, receive_time
             return self.offset
-        step = self.max_drift_rate * max(0.0, mcu_time - self._last_mcu)
-        self._last_mcu = mcu_time
+        mcu_step, host_step = mcu_time - self._last_mcu, receive_time - self._last_receive
+        step = self.max_drift_rate * max(0.0, mcu_step)
+        self._last_mcu, self._last_receive = mcu_time, receive_time
         self.envelope = min(self.envelope + step, delay)
         side = 1 if delay - self.offset > self.max_error else -1 if self.offset - self.envelope > self.max_error else 0
+        if side > 0 and self._after_silence is not None and mcu_step > 0.0 and host_step >= 0.5 * mcu_step:
+            # late after a silence, and the next packet came as far after it as it was sampled: the
+            # stream goes on at its pace (a burst of queued packets comes within microseconds)
+            self._anchor(min(self._after_silence, delay))
+            return self.offset
+        self._after_silence = delay if side > 0 and host_step > self.reanchor_after else None
         if side != self._side or mcu_time - self._since[0] > self.PACE * (receive_time - self._since[1]) + self.max_error:
             # a new side, or faster than real time (a burst, lockstep): the span starts here
             self._side, self._since, self._least = side, (mcu_time, receive_time), math.inf
@@ -142,7 +153,7 @@ class ClockOffset:
     def _anchor(self, delay: float) -> None:
         self.offset = self.envelope = delay
         self.anchors += 1
-        self._side, self._least = 0, math.inf
+        self._side, self._least, self._after_silence = 0, math.inf, None
 
     def reset(self) -> None:
         self._last_mcu = None

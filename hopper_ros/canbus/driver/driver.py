@@ -178,6 +178,7 @@ class MotorDriver:
         self._sync_outstanding = False
         self._silent_syncs = 0              # SYNCs in a row the drive has not answered
         self._last_cycle = now
+        self._last_answer = now             # when the drive last answered a SYNC (its TPDOs complete)
         self._next_master_heartbeat = now
         self._nmt_start_sent_at = -math.inf
         # start-up / shutdown sequence
@@ -439,7 +440,7 @@ class MotorDriver:
         status.current = current_ma / 1000.0
         status.torque = self.units.torque(status.current)
         status.commanded_mode = self._mode if (self._want_enabled and state is State.OPERATION_ENABLED) else MODE_DISABLED
-        return self._tpdo_received(1)
+        return self._tpdo_received(1, now)
 
     def _on_tpdo2(self, data: bytes, now: float) -> bool:
         rpm, mode, error_code = TPDO_MAPPINGS[2].decode(data)
@@ -448,13 +449,14 @@ class MotorDriver:
         status.operation_mode = mode
         if error_code and error_code != status.fault_code:
             self._set_fault(error_code)
-        return self._tpdo_received(2)
+        return self._tpdo_received(2, now)
 
-    def _tpdo_received(self, number: int) -> bool:
+    def _tpdo_received(self, number: int, now: float) -> bool:
         self.counters["tpdo_received"] += 1
         self._tpdo_seen |= 1 << (number - 1)
         if self._sync_outstanding and self._tpdo_seen == (1 << len(TPDO_MAPPINGS)) - 1:
             self._sync_outstanding = False
+            self._last_answer = now
             return True
         return False
 
@@ -581,7 +583,10 @@ class MotorDriver:
         ramp waits (its start moves with the clock) instead of running out in a stance that is frozen."""
         if self._silent_syncs >= SILENT_SYNCS and self._ramp is not None and now > self._ramp[2]:
             tau_0, duration, start, stamp, held = self._ramp
-            pause = now - self._last_cycle
+            # the first silent period found: the robot stopped after the drive's last answer, so the
+            # ramp is held from then (the SILENT_SYNCS periods it took to tell are not lost torque)
+            since = max(self._last_answer, start) if self._silent_syncs == SILENT_SYNCS else self._last_cycle
+            pause = now - since
             self._ramp = (tau_0, duration, start + pause, stamp, held + pause)
             self.counters["ramp_held_syncs"] += 1
 
