@@ -165,6 +165,7 @@ SENSING = Section({"sensing": Section({
         "max_prediction_gap": Number("s", gt=0),
         "clock_drift_rate": Number("s/s", ge=0),
         "clock_max_error": Number("s", ge=0),
+        "clock_max_lag": Number("s", ge=0),
         "clock_reanchor_after": Number("s", ge=0),
     }),
     "detector": Section({

@@ -14,7 +14,8 @@ from hopper_ros.harness.live_graph import LiveGraph
 
 
 def test_killing_the_estimator_and_controller_container_disables_the_drive_and_it_comes_back(tmp_path):
-    arguments = () if realtime_scheduling_allowed()[0] else ("realtime_priority:=0", "driver_priority:=0")
+    arguments = () if realtime_scheduling_allowed()[0] else ("realtime_priority:=0", "robot_priority:=0",
+                                                             "driver_priority:=0")
     with LiveGraph("demo.launch.yaml", tmp_path, arguments, env=dict(os.environ)) as graph:
         assert graph.wait_up(), graph.log_lines(0)[-20:]
         kill = graph.kill("sensing")

@@ -21,13 +21,13 @@ from hopper_ros.sim.config import load_sim_config
 
 HARDWARE = load_hardware()
 CONTROL = load_control()
-DRIVER = load_motor_driver("demo/motor_driver.yaml").driver   # the demo's (launch/demo*.launch.yaml)
+DRIVER = load_motor_driver().driver                # the demo's (launch/demo.launch.yaml: motor_driver.yaml)
 SETPOINT = (0.39, 2.0)
 STRIDES = 8
 
 
 def run_graph(host_delay=lambda t: 0.0, graph_hook=None):
-    """The demo's loop (control.yaml, demo/motor_driver.yaml) for STRIDES strides at SETPOINT."""
+    """The demo's loop (control.yaml, motor_driver.yaml) for STRIDES strides at SETPOINT."""
     graph = GraphLockstep(load_sim_config(), HARDWARE, DeadbeatController(load_params(), CONTROL.deadbeat),
                           driver_settings=DRIVER, stride_settings=CONTROL.stride, host_delay=host_delay)
     if graph_hook is not None:

@@ -83,7 +83,9 @@ def _diagonal_inverse(matrix: np.ndarray) -> np.ndarray:
 
 class ClockOffset:
     """Host time minus microcontroller time, changing slowly so that stamps keep the
-    microcontroller's spacing, and never more than `max_error` wrong for longer than `reanchor_after`.
+    microcontroller's spacing, never more than `max_error` early nor `max_lag` late for longer than
+    `reanchor_after`. A packet earlier than the mapping allows is proof, so the late side's bound is
+    tight (0.5 ms: the stance ramp's timing moves the apex ~2 mm per ms); lateness alone is not.
 
     A packet can only arrive after it was sampled, so the least-delayed packets bound the offset:
     `envelope` drops at once to a smaller (receive - mcu time) and otherwise rises by at most
@@ -93,7 +95,7 @@ class ClockOffset:
 
     Re-anchoring, in both directions: when for `reanchor_after` seconds of host time every packet
     arrived more than `max_error` later than the offset says (the simulated robot skipped time,
-    the host clock stepped forward), or the envelope stayed more than `max_error` below it (the
+    the host clock stepped forward), or the envelope stayed more than `max_lag` below it (the
     first packets came late and the mapping was anchored on them, the host clock stepped back), the
     offset jumps to the least delay of that span (`anchors` counts them). The span is host time, and
     it starts again wherever the stream ran faster than real time (its microcontroller time
@@ -109,9 +111,10 @@ class ClockOffset:
 
     PACE = 1.1   # [1] a span whose microcontroller time advanced faster than this x host time is no real-time stream
 
-    def __init__(self, max_drift_rate: float, max_error: float, reanchor_after: float) -> None:
+    def __init__(self, max_drift_rate: float, max_error: float, reanchor_after: float, max_lag: float | None = None) -> None:
         self.max_drift_rate = max_drift_rate
         self.max_error = max_error
+        self.max_lag = max_error if max_lag is None else max_lag
         self.reanchor_after = reanchor_after
         self.offset = 0.0
         self.envelope = 0.0
@@ -133,7 +136,7 @@ class ClockOffset:
         step = self.max_drift_rate * max(0.0, mcu_step)
         self._last_mcu, self._last_receive = mcu_time, receive_time
         self.envelope = min(self.envelope + step, delay)
-        side = 1 if delay - self.offset > self.max_error else -1 if self.offset - self.envelope > self.max_error else 0
+        side = 1 if delay - self.offset > self.max_error else -1 if self.offset - self.envelope > self.max_lag else 0
         if side > 0 and self._after_silence is not None and mcu_step > 0.0 and host_step >= 0.5 * mcu_step:
             # late after a silence, and the next packet came as far after it as it was sampled: the
             # stream goes on at its pace (a burst of queued packets comes within microseconds)
@@ -187,7 +190,7 @@ class StateEstimator:
         self.kf.inv = _diagonal_inverse
         self._row_sets = {}   # accepted-axes mask -> (H, R) of those rows
         self.clock = ClockOffset(settings.clock_drift_rate, settings.clock_max_error,
-                                 settings.clock_reanchor_after)
+                                 settings.clock_reanchor_after, settings.clock_max_lag)
         self.counters = dict.fromkeys(COUNTER_NAMES, 0)
         self.last_problem = ""
         self.initialised = False

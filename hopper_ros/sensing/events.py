@@ -78,6 +78,7 @@ from .samples import DetectedEvent, Estimate, EventType
 COUNTER_NAMES = ("samples", "untrusted_samples", "track_lost", "track_acquired", "strides",
                  "apex", "pre_touchdown", "touchdown", "bottom", "liftoff", "stamp_steps")
 FLIGHT_FIT_MIN_SAMPLES = 10   # with flight_fit_settle: no apex is timed within 15 ms of a lift-off
+STEP_TOLERANCE = 1e-4         # [s] consecutive states whose spacing differs more from the last regular one: a step
 _NEWTON_STEPS = 8
 
 
@@ -287,7 +288,8 @@ class EventDetector:
             follows = step == 0 or step == self._run + 1
             self._run = self._run + 1 if step == 0 else 0
             spacing = e.stamp - self._shift - stamp
-            if 0.0 < spacing <= self.settings.max_state_spacing:
+            regular = self._spacing is not None and abs(spacing - self._spacing) <= STEP_TOLERANCE
+            if 0.0 < spacing <= self.settings.max_state_spacing and (regular or not follows or self._spacing is None):
                 self._spacing = spacing
             elif follows and self._spacing is not None:
                 # the stamps' mapping stepped (the estimator re-anchored it, the host clock stepped),
