@@ -23,9 +23,10 @@ from .experiment import ExperimentSeries
 from .robot import SimRobot, SimSample
 
 MODES = ("realtime", "lockstep")
-RESYNC_PERIODS = 4         # further behind than this many periods, real-time mode does not catch up: the time
+RESYNC_PERIODS = 2         # further behind than this many periods, real-time mode does not catch up: the time
                            #   missed is skipped, the robot's world was frozen (issue 29: caught up, the backlog
-                           #   ran with the drive's last command: a stalled stance lost its ramp's torque)
+                           #   ran with the drive's last command: a stalled stance lost its ramp's torque; a robot
+                           #   behind the wall clock takes the driver's host-timed ramp early: 2 mm of apex per ms)
 
 
 def open_drive(can_setting: str, hardware: HardwareConfig, port: int | None):
