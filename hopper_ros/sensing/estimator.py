@@ -143,8 +143,9 @@ class ClockOffset:
             self._anchor(min(self._after_silence, delay))
             return self.offset
         self._after_silence = delay if side > 0 and host_step > self.reanchor_after else None
-        if side != self._side or mcu_time - self._since[0] > self.PACE * (receive_time - self._since[1]) + self.max_error:
-            # a new side, or faster than real time (a burst, lockstep): the span starts here
+        if (side != self._side or host_step > self.reanchor_after
+                or mcu_time - self._since[0] > self.PACE * (receive_time - self._since[1]) + self.max_error):
+            # a new side, a silence, or faster than real time (a burst, lockstep): the span starts here
             self._side, self._since, self._least = side, (mcu_time, receive_time), math.inf
         self._least = min(self._least, delay if side > 0 else self.envelope)
         if side and receive_time - self._since[1] >= self.reanchor_after:
