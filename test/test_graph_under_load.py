@@ -150,3 +150,19 @@ def test_sensing_that_stops_while_hopping_disables_the_drive():
         assert abs(run.true_apexes[-1][1] - SETPOINT[0]) < 0.005 and not graph.robot.plant.fallen, (fell, run.true_apexes[-3:])
     finally:
         graph.close()
+
+
+def test_a_drive_start_up_error_before_the_throw_does_not_keep_the_drive_off():
+    """Start-up ordering: the motor driver started before the simulated robot's hub answered, reported
+    ERROR once ("drive start-up failed: SDO timed out") and configured the drive 0.25 s later. The
+    controller had latched its safe state on that error: it commanded the drive disabled until an
+    apex, the robot was never thrown (the demo waits for an enabled drive), the graph never came up."""
+    from hopper_ros.control.stride_machine import MODE_POSITION
+    from hopper_ros.control.stride_policy import StridePolicy
+
+    policy = StridePolicy(DeadbeatController(load_params(), CONTROL.deadbeat), CONTROL.stride)
+    assert not policy.on_drive_fault("drive start-up failed: SDO 0x1017:00 timed out")   # nothing to stop yet
+    policy.on_setpoint(*SETPOINT)
+    command = policy.command(0.0)
+    assert command.mode == MODE_POSITION and policy.counters["faults"] == 1
+    assert policy.phase is Phase.INITIALISE

@@ -166,10 +166,16 @@ class StridePolicy:
 
     def on_drive_fault(self, message: str) -> bool:
         """The motor driver reports a drive fault or a lost drive: hold the leg, no torque. False
-        when the stride is in the safe state already."""
+        when the stride is in the safe state already. Before the first apex (no stride yet: the robot
+        held, waiting for its throw) it is reported and nothing latches: the driver keeps a faulted
+        drive off itself, and a start-up that failed once (the simulated robot's hub not up yet) left
+        the controller safe, its drive disabled, and the demo waiting for an enabled drive forever."""
         if self.machine.phase is Phase.SAFE:
             return False
         self.counters["faults"] += 1
+        if self.machine.phase in (Phase.IDLE, Phase.INITIALISE):
+            self.events.append(("error", f"motor driver: {message} (no stride yet: the leg is held once it is back)"))
+            return False
         self.machine.fault(f"motor driver: {message}")
         self.events.append(("error", self.machine.reason))
         return True

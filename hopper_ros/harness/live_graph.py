@@ -87,9 +87,10 @@ class LiveGraph:
         self._reader.start()
         from rclpy.signals import SignalHandlerOptions
 
-        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("live_graph_monitor")
-        self.executor = SingleThreadedExecutor()
+        self.context = rclpy.Context()           # its own: this process may have rclpy initialised already
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node("live_graph_monitor", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         seen = self.seen
 
@@ -141,7 +142,7 @@ class LiveGraph:
 
             self.executor.shutdown()
             self.node.destroy_node()
-            rclpy.try_shutdown()
+            rclpy.try_shutdown(context=self.context)
 
     def _read(self) -> None:
         for line in self.process.stdout:
