@@ -160,9 +160,13 @@ def test_a_drive_start_up_error_before_the_throw_does_not_keep_the_drive_off():
     from hopper_ros.control.stride_machine import MODE_POSITION
     from hopper_ros.control.stride_policy import StridePolicy
 
+    from hopper_ros.control.stride_machine import MODE_DISABLED
+    from hopper_ros.control.stride_policy import FAULT_ACKNOWLEDGE
+
     policy = StridePolicy(DeadbeatController(load_params(), CONTROL.deadbeat), CONTROL.stride)
-    assert not policy.on_drive_fault("drive start-up failed: SDO 0x1017:00 timed out")   # nothing to stop yet
+    policy.on_drive_fault("drive start-up failed: SDO 0x1017:00 timed out")
     policy.on_setpoint(*SETPOINT)
-    command = policy.command(0.0)
-    assert command.mode == MODE_POSITION and policy.counters["faults"] == 1
-    assert policy.phase is Phase.INITIALISE
+    # acknowledged (the driver resets a drive fault once the stream says MODE_DISABLED), then held
+    assert policy.command(0.0).mode == MODE_DISABLED and policy.command(FAULT_ACKNOWLEDGE / 2).mode == MODE_DISABLED
+    assert policy.command(FAULT_ACKNOWLEDGE + 1e-3).mode == MODE_POSITION
+    assert policy.counters["faults"] == 1 and policy.phase is Phase.INITIALISE

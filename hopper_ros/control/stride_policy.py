@@ -37,6 +37,8 @@ from .deadbeat import DeadbeatController, StrideDecision
 from .stride_machine import MODE_DISABLED, Phase, StrideMachine, StridePlan
 
 MODE_RAMP = 3   # MotorCommand.MODE_RAMP: the driver runs the ramp (2.32) from the stamp
+FAULT_ACKNOWLEDGE = 0.1   # [s] MODE_DISABLED this long after a drive fault before the first stride: the
+                          #   motor driver resets a fault once the stream acknowledged it (docs/motor_driver.md)
 
 
 @dataclass(frozen=True)
@@ -94,6 +96,7 @@ class StridePolicy:
         self._last = (MODE_DISABLED, 0.0)
         self._last_sent = -math.inf
         self._sensed = math.nan         # when the last gait event or apex came (the caller's clock)
+        self._acknowledge = -math.inf   # a drive fault before the first stride: MODE_DISABLED until then
         self.sensing_lost = False
 
     @property
@@ -174,8 +177,10 @@ class StridePolicy:
             return False
         self.counters["faults"] += 1
         if self.machine.phase in (Phase.IDLE, Phase.INITIALISE):
-            self.events.append(("error", f"motor driver: {message} (no stride yet: the leg is held once it is back)"))
-            return False
+            self.events.append(("error", f"motor driver: {message} (no stride yet: acknowledged, the leg is held "
+                                         "once the drive is back)"))
+            self._acknowledge = math.inf        # MODE_DISABLED for FAULT_ACKNOWLEDGE, the driver's cue to reset a fault
+            return True
         self.machine.fault(f"motor driver: {message}")
         self.events.append(("error", self.machine.reason))
         return True
@@ -193,6 +198,10 @@ class StridePolicy:
             self.events.append(("error", f"no gait event for {s.sensing_timeout * 1e3:.0f} ms while hopping: "
                                          "sensing lost, drive disabled"))
         if self.sensing_lost:
+            return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp)
+        if self._acknowledge == math.inf:
+            self._acknowledge = now + FAULT_ACKNOWLEDGE
+        if now < self._acknowledge:
             return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp)
         mode, setpoint = machine.command(now)
         if machine.phase is Phase.BRAKE:
