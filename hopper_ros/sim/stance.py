@@ -14,6 +14,7 @@ import math
 
 THRESHOLD = 0.5      # [N m] applied hip torque that counts as the ramp (the demo's tau_0: 8-12 N m)
 LATE_AFTER = 0.005   # [s] an onset later than this after the touchdown: the ramp was held
+KEEP_ONSETS = 1000   # onsets kept (the counters count them all)
 
 
 class StanceTorque:
@@ -23,7 +24,7 @@ class StanceTorque:
         self.without_torque = 0        # stances in which no torque reached the leg: ramps cancelled
         self.late = 0                  # stances whose torque began more than late_after in: ramps held
         self.onset_max = 0.0           # [s] the latest onset of a stance with torque
-        self.onsets: list[float] = []  # [s] per stance, NaN without torque
+        self.onsets: list[float] = []  # [s] per stance (the last KEEP_ONSETS), NaN without torque
         self._touchdown = math.nan
         self._onset = math.nan
 
@@ -42,6 +43,8 @@ class StanceTorque:
     def _close(self) -> None:
         self.stances += 1
         self.onsets.append(self._onset)
+        if len(self.onsets) > KEEP_ONSETS:     # a node runs for hours: the last ones
+            del self.onsets[:-KEEP_ONSETS // 2]
         if math.isnan(self._onset):
             self.without_torque += 1
         else:
