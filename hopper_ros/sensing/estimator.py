@@ -37,8 +37,9 @@ predict and one update call per sample). Update in Joseph form, A.1.2 line 11 (f
 
 Host stamps: the state's instant on the host clock is mcu_time + offset, the offset following the
 lower envelope of (receive time - mcu time) by at most `clock_drift_rate`, re-anchored, up or down,
-after `clock_reanchor_after` seconds of host time in which the packets all missed it by more than
-`clock_max_error` on the same side at real-time pace (`ClockOffset`).
+after `clock_reanchor_after` seconds of host time in which the packets all arrived more than
+`clock_max_error` late, or the envelope stayed `clock_max_lag` below it, at real-time pace
+(`ClockOffset`).
 """
 
 from __future__ import annotations
@@ -99,19 +100,22 @@ class ClockOffset:
     first packets came late and the mapping was anchored on them, the host clock stepped back), the
     offset jumps to the least delay of that span (`anchors` counts them). The span is host time, and
     it starts again wherever the stream ran faster than real time (its microcontroller time
-    advancing more than `PACE` x the host's, plus `max_error`), so neither a burst of packets queued while the host stalled
-    (late, but read within milliseconds; the next ones are on time) nor a lockstep simulation
+    advancing more than `PACE` x the host's, plus `max_error`) or fell silent, so neither a burst
+    of packets queued while the host stalled (late, but read within milliseconds; the next ones are
+    on time) nor a lockstep simulation
     (faster than real time: its stamps run ahead, spaced as the microcontroller's) moves the
     mapping. After a silence longer than `reanchor_after` (no packet at all: the simulated robot
     stalled) two late packets arriving as far apart as they were sampled are enough: the stream goes
     on at its pace, later by the time it missed. Before issue 29 only packets 0.1 s late for 1 s of
-    microcontroller time re-anchored it and only upwards: a simulated robot that skipped 50-150 ms left every stamp that much old
-    for minutes (every stance ramp cancelled), late first packets left them ahead (every ramp held).
+    microcontroller time re-anchored it and only upwards: a simulated robot that skipped 50-150 ms
+    left every stamp that much old for minutes (every stance ramp cancelled), late first packets
+    left them ahead (every ramp held).
     """
 
     PACE = 1.1   # [1] a span whose microcontroller time advanced faster than this x host time is no real-time stream
 
-    def __init__(self, max_drift_rate: float, max_error: float, reanchor_after: float, max_lag: float | None = None) -> None:
+    def __init__(self, max_drift_rate: float, max_error: float, reanchor_after: float,
+                 max_lag: float | None = None) -> None:
         self.max_drift_rate = max_drift_rate
         self.max_error = max_error
         self.max_lag = max_error if max_lag is None else max_lag
@@ -120,7 +124,7 @@ class ClockOffset:
         self.envelope = 0.0
         self.anchors = 0
         self._last_mcu: float | None = None
-        self._side = 0                           # +1: packets late, -1: envelope early, beyond max_error
+        self._side = 0                           # +1: packets late beyond max_error, -1: envelope early beyond max_lag
         self._since = (0.0, 0.0)                 # (mcu, receive time) of the span's first packet
         self._least = math.inf                   # the span's least delay
         self._last_receive = 0.0
