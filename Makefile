@@ -7,7 +7,7 @@ VENV_PYTHON := .venv/bin/python
 # DDS discovery stays on loopback unless the caller asked for another range.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: setup test bench demo clean
+.PHONY: setup test bench demo soak clean
 
 # Idempotent: a second run only hashes the inputs (see tools/setup.sh).
 setup:
@@ -19,6 +19,11 @@ test: setup
 # BENCH_ARGS, e.g. BENCH_ARGS=--quick or BENCH_ARGS="--only messages"
 bench: setup
 	$(VENV_PYTHON) bench/run.py $(BENCH_ARGS)
+
+# The whole demo graph for an hour on the simulated robot (bench/soak.py: memory, falls, late samples,
+# the recording); not part of `make bench` nor `make test`. SOAK_ARGS, e.g. SOAK_ARGS="--minutes 5"
+soak: setup
+	$(VENV_PYTHON) bench/soak.py $(SOAK_ARGS)
 
 # The closed-loop Fig 5.5 run on the simulated robot, the whole graph as separate processes;
 # table and plot in demo_out/ (hopper_ros/cli/demo.py).

@@ -27,6 +27,7 @@ import yaml
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from hopper_ros.environment import free_domain_id  # noqa: E402
 from hopper_ros.hardware.config import load_hardware  # noqa: E402
 from hopper_ros.harness.collect import CollectionSettings, collect  # noqa: E402
 from hopper_ros.msg import BodyMeasurement  # noqa: E402
@@ -57,19 +58,6 @@ def write_rate(folder: Path, count: int, raw: bool) -> float:
 LIVE_TOPICS = ("force_plate", "sim/truth", "encoder_sample", "body_measurement", "body_state")   # 1 kHz each
 
 
-def _free_domain_id() -> int:
-    """A ROS domain no participant on this machine uses (as test/conftest.py picks one)."""
-    used = set()
-    for table in ("/proc/net/udp", "/proc/net/udp6"):
-        for line in Path(table).read_text().splitlines()[1:]:
-            used.add(int(line.split()[1].rsplit(":", 1)[1], 16))
-    for domain in range(150, 232):
-        base = 7400 + 250 * domain
-        if not any(base <= port < base + 250 for port in used):
-            return domain
-    raise RuntimeError("no free ROS domain id")
-
-
 def live_recording(seconds: float) -> list[dict]:
     """`hopper bag record` of five 1 kHz topics of the live sensing graph (sim_robot, encoder_bridge,
     state_estimator) for `seconds`: what the recorder dropped (publisher sequence gaps, counted by
@@ -79,7 +67,7 @@ def live_recording(seconds: float) -> list[dict]:
 
     from hopper_ros.recording.bag import bag_info
 
-    env = dict(os.environ, PYTHONUNBUFFERED="1", ROS_DOMAIN_ID=str(_free_domain_id()))
+    env = dict(os.environ, PYTHONUNBUFFERED="1", ROS_DOMAIN_ID=str(free_domain_id()))
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     cli = [sys.executable, "-m", "hopper_ros.cli"]
     quiet = {"cwd": REPO, "env": env, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}

@@ -165,6 +165,7 @@ SENSING = Section({"sensing": Section({
         "max_prediction_gap": Number("s", gt=0),
         "clock_drift_rate": Number("s/s", ge=0),
         "clock_max_error": Number("s", ge=0),
+        "clock_max_lag": Number("s", ge=0),
         "clock_reanchor_after": Number("s", ge=0),
     }),
     "detector": Section({
@@ -211,7 +212,11 @@ CONTROL = Section({
         "ramp_ahead": Flag(default=False),
         "touchdown_grace": Number("s", gt=0, default=0.02),
         "keep_alive": Number("s", gt=0, le=0.1, default=0.003),
-    }, default={"ramp_ahead": False, "touchdown_grace": 0.02, "keep_alive": 0.003}),
+        "executor_timeout": Number("s", gt=0, default=0.02),
+        "sensing_timeout": Number("s", gt=0, default=0.5),
+        "keep_alive_priority_boost": Number(ge=0, le=49, integer=True, default=10),
+    }, default={"ramp_ahead": False, "touchdown_grace": 0.02, "keep_alive": 0.003, "executor_timeout": 0.02,
+                "sensing_timeout": 0.5, "keep_alive_priority_boost": 10}),
 })
 
 # ------------------------------------------------------------------------------------ motor_driver.yaml

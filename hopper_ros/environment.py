@@ -20,8 +20,9 @@ respected (LOCALHOST then stays rmw_fastrtps's). A misspelt range is rejected in
 handed to rcl. No ROS import here.
 
 Real-time priority: `HOPPER_REALTIME_PRIORITY=N` (1-99; a launch entry's `realtime_priority`)
-makes `run_node` put the node's process on SCHED_FIFO at priority N before rclpy starts, so the
-DDS threads and the node's own threads inherit it (`apply_realtime_priority`). That is how the
+makes `run_node` put every thread of the node's process (rclpy's, DDS's, the node's own; threads
+started later inherit it) on SCHED_FIFO at priority N once the node is built, its start-up having
+run with normal scheduling (`apply_realtime_priority`). That is how the
 nodes of the 1 kHz loop run on the robot's real-time PC: a sample is handled as soon as it comes
 instead of waiting behind a busy process. Linux's RT throttling (95 % of each second by default)
 keeps a runaway node from locking the machine. Without the privilege (CAP_SYS_NICE or an
@@ -179,3 +180,29 @@ def restore_default_stop_signals() -> list[str]:
             signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
             changed.append(signal.Signals(signum).name)
     return changed
+
+
+def _bound_udp_ports() -> set[int]:
+    ports = set()
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            with open(table, encoding="ascii") as handle:
+                lines = handle.read().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            ports.add(int(line.split()[1].rsplit(":", 1)[1], 16))
+    return ports
+
+
+def free_domain_id(seed: int | None = None) -> int:
+    """A ROS_DOMAIN_ID no participant on this machine uses (no UDP port of the domain's range
+    7400 + 250 id ... + 249 bound), never 0 (the usual robot's): the tests', the benches' own graph."""
+    used = _bound_udp_ports()
+    candidates = list(range(1, 102))
+    start = (os.getpid() if seed is None else seed) % len(candidates)
+    for domain in candidates[start:] + candidates[:start]:
+        base = 7400 + 250 * domain
+        if not any(base <= port < base + 250 for port in used):
+            return domain
+    raise RuntimeError("no free ROS domain id found on this machine")

@@ -28,7 +28,9 @@ ROS 2 and with `hopper launch FILE` here (containers: hopper launch only, see be
           args: "--extra 1"           # arguments after --ros-args ... --
           ros_args: "--log-level debug"   # more ROS arguments
           output: screen              # accepted; hopper launch always relays the output
-          on_exit: shutdown           # accepted; hopper launch always stops all when one node ends
+          on_exit: shutdown           # accepted; hopper launch stops all when a node ends (but see respawn)
+          respawn: true               # started again when it ends by itself (launch_ros's Node), after
+          respawn_delay: 1.0          #   this many seconds (default 0); the others run on. Not with on_exit
           sigterm_timeout: 5          # s from SIGINT to SIGTERM when stopping (ros2 launch's meaning)
           sigkill_timeout: 5          # s from SIGTERM to SIGKILL
           if: $(var with_sim)         # conditions (also on arg and let): true/false/1/0
@@ -80,8 +82,13 @@ Each node runs as `python -m hopper_ros.cli run EXEC --ros-args ... -- ARGS` in 
 (process group), with the default SIGINT/SIGTERM dispositions whatever ours were. Its
 stdout/stderr lines are copied to ours, prefixed with `[label] ` ([namespace/]name).
 
-Stopping: on SIGINT/SIGTERM (a second one skips ahead), or as soon as one process ends by itself,
-every process group gets SIGINT, then SIGTERM after the largest `sigterm_timeout`, then SIGKILL
+Respawn: a node (or container) with `respawn: true` that ends by itself while the launch runs is
+started again after its `respawn_delay`, the others running on (launch's ExecuteProcess: any exit,
+clean or not; with `on_exit: shutdown` as well ros2 launch would shut down instead, so the pair is
+refused). Its end does not count in the exit status.
+
+Stopping: on SIGINT/SIGTERM (a second one skips ahead), or as soon as a process without respawn
+ends by itself, every process group gets SIGINT, then SIGTERM after the largest `sigterm_timeout`, then SIGKILL
 after the largest `sigkill_timeout`; signals go to the whole group, so grandchildren stop too.
 Exit status: 0 when the stop was requested and every node exited 0; otherwise non-zero (the
 status of the node that ended by itself: its exit code, 128 + signal, or 1 when it exited 0; 1
@@ -117,7 +124,7 @@ DEFAULT_SIGTERM_TIMEOUT = 5.0      # launch's default sigkill_timeout: SIGTERM -
 _ENTITIES = ("arg", "let", "node", "node_container")
 CONTAINER = "component_container"   # our container executable (hopper_ros/nodes/component_container.py)
 _NODE_KEYS = {"pkg", "exec", "name", "namespace", "param", "remap", "env", "args", "ros_args", "output", "on_exit",
-              "sigterm_timeout", "sigkill_timeout", "if", "unless"}
+              "sigterm_timeout", "sigkill_timeout", "if", "unless", "respawn", "respawn_delay"}
 _CONTAINER_KEYS = (_NODE_KEYS - {"args"}) | {"composable_node"}
 _COMPOSABLE_KEYS = {"pkg", "plugin", "name", "namespace", "param", "remap", "extra_arg", "if", "unless"}
 _ARG_KEYS = {"name", "default", "description", "if", "unless"}
@@ -138,6 +145,8 @@ class ChildSpec:
     argv: list[str]
     env: dict[str, str] | None = None
     cwd: str | None = None
+    respawn: bool = False          # started again when it ends by itself (launch's `respawn`)
+    respawn_delay: float = 0.0     # [s] after it ended
 
 
 @dataclass
@@ -328,6 +337,17 @@ def _timeout(entity: dict, key: str, where: str) -> float | None:
     return float(value)
 
 
+def _flag(context: _Context, entity: dict, key: str, where: str) -> bool:
+    """A true/false attribute (YAML boolean or the text of a substitution), False when absent."""
+    if key not in entity:
+        return False
+    raw = entity[key]
+    text = str(raw).lower() if isinstance(raw, bool) else str(context.substitute(str(raw), where)).strip().lower()
+    if text not in ("true", "false", "1", "0"):
+        raise LaunchFileError(f"{where}: '{key}' must be true or false, got {raw!r}")
+    return text in ("true", "1")
+
+
 def _names(context: _Context, entity: dict, where: str, ros_args: list[str],
            required: bool = False) -> tuple[str | None, str | None]:
     """`name` and `namespace` as `-r __node:=` / `-r __ns:=` (namespace made absolute)."""
@@ -436,6 +456,11 @@ def _node(context: _Context, entity: dict, where: str, env: dict[str, str],
     on_exit = _string(context, entity, "on_exit", where)
     if on_exit is not None and on_exit != "shutdown":
         raise LaunchFileError(f"{where}: 'on_exit' can only be 'shutdown' (as in ros2 launch), got {on_exit!r}")
+    respawn = _flag(context, entity, "respawn", where)
+    respawn_delay = _timeout(entity, "respawn_delay", where)
+    if respawn and on_exit is not None:
+        raise LaunchFileError(f"{where}: 'respawn: true' with 'on_exit: shutdown': ros2 launch shuts everything "
+                              f"down when the node ends, so it is never respawned; give one of the two")
     child_env = env
     if "env" in entity:
         child_env = dict(env)
@@ -446,7 +471,8 @@ def _node(context: _Context, entity: dict, where: str, env: dict[str, str],
             realtime_priority(child_env)
         except RosEnvironmentError as exc:
             raise LaunchFileError(f"{where}: {exc}") from None
-    spec = ChildSpec(labels[0], node_command(executable, ros_args, extra), child_env)
+    spec = ChildSpec(labels[0], node_command(executable, ros_args, extra), child_env, respawn=respawn,
+                     respawn_delay=respawn_delay or 0.0)
     return spec, _timeout(entity, "sigterm_timeout", where), _timeout(entity, "sigkill_timeout", where), labels
 
 
@@ -618,6 +644,7 @@ class _Child:
     pidfd: int | None = None
     status: int | None = None  # returncode once reaped (negative: killed by that signal)
     group_gone: bool = False
+    respawned: bool = False    # ended by itself and started again: its status is not the launch's
     buffers: dict[int, bytearray] = field(default_factory=dict)
 
     @property
@@ -656,6 +683,8 @@ class Launcher:
         self._stage_deadline = math.inf
         self._failure: tuple[_Child | None, int] | None = None
         self._gave_up = False
+        self._respawns: list[tuple[float, ChildSpec]] = []   # (when, spec) of nodes to start again
+        self.respawn_counts: dict[str, int] = {}
 
     # -- output
     def _say(self, text: str) -> None:
@@ -729,7 +758,7 @@ class Launcher:
             stderr=subprocess.PIPE,
             env=spec.env,
             cwd=spec.cwd,
-            start_new_session=True,  # own session and process group: no terminal signals, group kill
+            process_group=0,  # own process group (no terminal signals, group kill), in our session: one autogroup
             preexec_fn=_child_preexec(os.getpid()),
         )
         child = _Child(spec, process)
@@ -754,7 +783,13 @@ class Launcher:
             os.close(child.pidfd)
             child.pidfd = None
         how = f"exit status {child.status}" if child.status >= 0 else f"signal {signal.Signals(-child.status).name}"
-        if self._stage == 0:
+        if self._stage == 0 and child.spec.respawn:
+            child.respawned = True
+            count = self.respawn_counts[child.spec.label] = self.respawn_counts.get(child.spec.label, 0) + 1
+            self._say(f"{child.spec.label} ended by itself ({how}); respawning it in {child.spec.respawn_delay:g} s "
+                      f"(respawn {count})")
+            self._respawns.append((time.monotonic() + child.spec.respawn_delay, child.spec))
+        elif self._stage == 0:
             self._say(f"{child.spec.label} ended by itself ({how}); stopping the others")
             code = child.status if child.status > 0 else (128 - child.status if child.status < 0 else 1)
             self._failure = (child, code)
@@ -802,7 +837,7 @@ class Launcher:
 
         if self._failure is not None:
             return self._failure[1]
-        if self._gave_up or any(c.status != 0 for c in self._children) or self._stage >= 2:
+        if self._gave_up or any(c.status != 0 for c in self._children if not c.respawned) or self._stage >= 2:
             return 1
         return 0
 
@@ -831,15 +866,31 @@ class Launcher:
                         self._gave_up = True
                         return
                     self._escalate(now)
+            if self._stage == 0:
+                timeout = self._respawn_due(now)
+            else:
+                self._respawns.clear()
+                timeout = None
             # Without pidfds we look at the children now and then; while stopping, grandchildren
             # (no event for them) are checked for every 0.1 s.
-            timeout = None
             if self._stage > 0:
                 timeout = max(0.0, min(0.1, self._stage_deadline - now))
-            elif any(c.pidfd is None for c in self._children):
-                timeout = 0.2
+            elif any(c.pidfd is None for c in self._children if c.status is None):
+                timeout = 0.2 if timeout is None else min(timeout, 0.2)
             for key, _events in self._selector.select(timeout):
                 self._handle(key)
+
+    def _respawn_due(self, now: float) -> float | None:
+        """Start the nodes whose respawn delay is over; seconds until the next one (None: none)."""
+        due = [entry for entry in self._respawns if entry[0] <= now]
+        for entry in due:
+            self._respawns.remove(entry)
+            try:
+                self._start(entry[1])
+            except OSError as exc:
+                self._say(f"cannot respawn {entry[1].label}: {exc}; stopping the others")
+                self._failure = (None, 1)
+        return max(0.0, min(when for when, _ in self._respawns) - now) if self._respawns else None
 
     def _handle(self, key: selectors.SelectorKey) -> None:
         kind, child = key.data

@@ -21,38 +21,14 @@ from pathlib import Path
 
 import pytest
 
-from hopper_ros.environment import restore_default_stop_signals
+from hopper_ros.environment import free_domain_id, restore_default_stop_signals
 
 REPO = Path(__file__).resolve().parent.parent
 SAFETY_TIMEOUT = 60.0  # [s] bound on any wait in the tests: a hang fails instead of blocking CI
 
 
-def _bound_udp_ports() -> set[int]:
-    ports = set()
-    for table in ("/proc/net/udp", "/proc/net/udp6"):
-        try:
-            lines = Path(table).read_text().splitlines()[1:]
-        except OSError:
-            continue
-        for line in lines:
-            local = line.split()[1]
-            ports.add(int(local.rsplit(":", 1)[1], 16))
-    return ports
-
-
-def _free_domain_id() -> int:
-    used = _bound_udp_ports()
-    candidates = list(range(1, 102))  # 0 is the usual robot/default domain: never ours
-    start = os.getpid() % len(candidates)
-    for domain in candidates[start:] + candidates[:start]:
-        base = 7400 + 250 * domain
-        if not any(base <= port < base + 250 for port in used):
-            return domain
-    raise RuntimeError("no free ROS domain id found on this machine")
-
-
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-os.environ["ROS_DOMAIN_ID"] = str(_free_domain_id())
+os.environ["ROS_DOMAIN_ID"] = str(free_domain_id())
 from hopper_ros.environment import apply_ros_environment  # noqa: E402 - after the range is set
 
 apply_ros_environment()   # LOCALHOST: the loopback profile (every DDS socket on 127.0.0.1), for children too

@@ -59,7 +59,8 @@ def test_the_validator_names_the_key_and_converts():
 @pytest.mark.parametrize("name,schema", [
     ("hardware.yaml", HARDWARE), ("demo/hardware_500hz.yaml", HARDWARE), ("model.yaml", MODEL), ("sim.yaml", SIM),
     ("sensing.yaml", SENSING), ("control.yaml", CONTROL), ("motor_driver.yaml", MOTOR_DRIVER),
-    ("demo/motor_driver.yaml", MOTOR_DRIVER), ("identification.yaml", IDENTIFICATION),
+    ("demo/motor_driver_500hz.yaml", MOTOR_DRIVER),
+    ("identification.yaml", IDENTIFICATION),
     ("setpoints/fig5_5.yaml", SCHEDULE)])
 def test_every_shipped_config_file_passes_its_schema(name, schema):
     load_config(name, schema)
@@ -76,7 +77,7 @@ def test_the_typed_hardware_config_holds_exactly_the_checked_file(name):
     assert all(type(typed[s][k]) is type(v) for s in checked for k, v in checked[s].items() if s != "encoders")
 
 
-@pytest.mark.parametrize("name", ["motor_driver.yaml", "demo/motor_driver.yaml"])
+@pytest.mark.parametrize("name", ["motor_driver.yaml", "demo/motor_driver_500hz.yaml"])
 def test_the_typed_motor_driver_config_holds_the_checked_file(name):
     config, checked = load_motor_driver(name), load_config(name, MOTOR_DRIVER)["motor_driver"]
     typed = {**dataclasses.asdict(config.driver), **{key: getattr(config, key) for key in NODE_KEYS}}

@@ -121,7 +121,9 @@ def test_controller_stops_on_its_own_motor_drivers_error_only(rclpy_session, hop
     which its own status then says."""
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+    from hopper_ros.msg import ApexState, StrideCommand
     from hopper_ros.nodes.diagnostics import ERROR, OK, WARN, diagnostic_array, diagnostic_status, level_of, status_of
 
     node_process = hopper_cli("run", "deadbeat_controller", "--ros-args", "-r", "__ns:=/robot")
@@ -132,6 +134,11 @@ def test_controller_stops_on_its_own_motor_drivers_error_only(rclpy_session, hop
     reports = []
     node.create_subscription(DiagnosticArray, "/diagnostics", reports.append, 100)
     publisher = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    setpoint = node.create_publisher(ApexState, "/robot/apex_setpoint", latched)
+    apex = node.create_publisher(ApexState, "/robot/apex", 10)
+    strides = []
+    node.create_subscription(StrideCommand, "/robot/stride_command", strides.append, 10)
 
     def own_status():
         statuses = [status_of(array, "/robot/deadbeat_controller") for array in reports]
@@ -144,6 +151,12 @@ def test_controller_stops_on_its_own_motor_drivers_error_only(rclpy_session, hop
     try:
         assert spin_until(executor, lambda: publisher.get_subscription_count() >= 2 and own_status())
         assert level_of(own_status()[-1]) == OK
+        # a stride under way (before the first apex a drive error latches nothing: test_graph_under_load.py)
+        setpoint.publish(ApexState(apex_height=0.39, forward_speed=2.0))
+        assert spin_until(executor, lambda: apex.get_subscription_count())
+        spin_until(executor, lambda: False, timeout=0.3)
+        apex.publish(ApexState(stride_index=1, apex_height=0.39, forward_speed=2.0))
+        assert spin_until(executor, lambda: strides)
         drive_fault("/other/motor_driver")
         reports.clear()
         assert spin_until(executor, lambda: len(own_status()) >= 2)          # two reports later, still fine
@@ -159,4 +172,27 @@ def test_controller_stops_on_its_own_motor_drivers_error_only(rclpy_session, hop
         node_process.signal(signal.SIGINT)
         assert node_process.wait() == 0
         executor.shutdown()
+        node.destroy_node()
+
+
+def test_a_warning_after_an_error_does_not_kill_the_controller(rclpy_session):
+    """Issue 29, in-process: under load the drive's start-up timed out once (the motor driver's ERROR:
+    the controller logged it as an error), and the first infeasible stride's warning then came from
+    the same logging line: rclpy raised "Logger severity cannot be changed between calls", the
+    controller died and the robot fell."""
+    from hopper_ros.msg import ApexState
+    from hopper_ros.nodes.deadbeat_controller import DeadbeatControllerNode
+    from hopper_ros.nodes.diagnostics import ERROR, diagnostic_array, diagnostic_status
+
+    node = DeadbeatControllerNode()
+    try:
+        node._on_setpoint(ApexState(apex_height=0.39, forward_speed=2.0))
+        node._on_diagnostics(diagnostic_array(time.time(), [diagnostic_status(
+            "/motor_driver", {}, {}, "drive start-up failed: SDO 0x1016:01 timed out", ERROR)]))
+        assert node.policy.counters["faults"] == 1
+        node._on_apex(ApexState(stride_index=1, apex_height=0.02, forward_speed=9.0))     # out of reach
+        assert node.policy.counters["infeasible"] == 1
+        node._on_apex(ApexState(stride_index=2, apex_height=0.39, forward_speed=2.0))    # and on it goes
+        assert node.policy.counters["strides"] == 2 and node.policy.last_decision.feasible
+    finally:
         node.destroy_node()

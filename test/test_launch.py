@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -124,7 +125,10 @@ def test_arguments_lets_substitutions_and_conditions(monkeypatch):
         ({"launch": [{"node": {"exec": "sim_robot"}}]}, "entry 1 (node): missing 'pkg'"),
         ({"launch": [{"node": {"pkg": "demo_nodes_py", "exec": "talker"}}]}, "pkg 'demo_nodes_py': hopper launch starts the nodes of hopper_ros only"),
         ({"launch": [node("setpoint_scheduler", realtime_priority=50)]}, "entry 1 (node): 'realtime_priority' is not a key of ros2 launch's node: give the SCHED_FIFO priority as env [{name: HOPPER_REALTIME_PRIORITY, value: \"N\"}]"),
-        ({"launch": [node("setpoint_scheduler", respawn=True)]}, "entry 1 (node): unknown key(s) 'respawn' of 'node' (hopper launch supports: args, env,"),
+        ({"launch": [node("setpoint_scheduler", respawn_period=1)]}, "entry 1 (node): unknown key(s) 'respawn_period' of 'node' (hopper launch supports: args, env,"),
+        ({"launch": [node("setpoint_scheduler", respawn=True, on_exit="shutdown")]}, "'respawn: true' with 'on_exit: shutdown': ros2 launch shuts everything down"),
+        ({"launch": [node("setpoint_scheduler", respawn="often")]}, "'respawn' must be true or false, got 'often'"),
+        ({"launch": [node("setpoint_scheduler", respawn=True, respawn_delay="soon")]}, "'respawn_delay' must be a number of seconds >= 0"),
         ({"launch": [{"group": {}}]}, "entry 1: entity 'group' is not supported by hopper launch (supported: arg, let, node, node_container)"),
         ({"launch": [node("setpoint_scheduler"), node("setpoint_scheduler")]}, "entry 2 (node): a node 'setpoint_scheduler' is already started by entry 1"),
         ({"launch": [node("setpoint_scheduler", param=[{"from": "missing.yaml"}])]}, "parameter file 'missing.yaml' not found"),
@@ -167,8 +171,9 @@ def test_bad_command_lines_get_one_line(hopper_cli, tmp_path):
 
 
 def test_show_args_and_print(hopper_cli):
-    shown = hopper_cli("launch", "hopper_ros", "demo.launch.yaml", "realtime_priority:=0", "--show-args")
-    assert shown.wait() == 0 and shown.stdout == "realtime_priority:=0\n"
+    shown = hopper_cli("launch", "hopper_ros", "demo.launch.yaml", "realtime_priority:=0", "driver_priority:=0",
+                       "--show-args")
+    assert shown.wait() == 0 and shown.stdout == "realtime_priority:=0\nrobot_priority:=50\ndriver_priority:=0\n"
     printed = hopper_cli("launch", "demo_500hz.launch.yaml", "--print")
     assert printed.wait() == 0
     assert [line.split(":")[0] for line in printed.stdout.splitlines()] == [
@@ -189,6 +194,64 @@ _SUPERVISE = textwrap.dedent(
     sys.exit(Launcher(children, sigint_timeout=0.5, sigterm_timeout=5).run())
     """
 )
+
+
+def test_respawn_and_its_delay_are_read_as_launch_ros_does():
+    data = {"launch": [{"arg": {"name": "again", "default": "true"}},
+                       node("setpoint_scheduler", respawn="$(var again)", respawn_delay=0.5),
+                       node("stride_predictor", respawn=False), node("event_detector")]}
+    children = parse_launch(data, "t.yaml").children
+    assert [(c.respawn, c.respawn_delay) for c in children] == [(True, 0.5), (False, 0.0), (False, 0.0)]
+    assert not parse_launch(data, "t.yaml", arguments={"again": "false"}).children[0].respawn
+
+
+_RESPAWN = textwrap.dedent(
+    """
+    import sys
+    from hopper_ros.launcher import ChildSpec, Launcher
+    # both end cleanly (exit 0) on the launcher's SIGINT, as nodes do
+    node = "import signal, sys, time; signal.signal(signal.SIGINT, lambda *a: sys.exit(0)); print({!r}, flush=True); time.sleep(120)"
+    children = [ChildSpec("flaky", [sys.executable, "-c", node.format("up")], respawn=True, respawn_delay=0.3),
+                ChildSpec("steady", [sys.executable, "-c", node.format("ready")])]
+    sys.exit(Launcher(children, sigint_timeout=5, sigterm_timeout=5).run())
+    """
+)
+
+
+def test_a_respawned_node_comes_back_after_its_delay_and_the_others_run_on():
+    """`respawn: true`: a node killed (SIGKILL) is started again `respawn_delay` later, the launch and
+    its other nodes go on, and a stop requested afterwards is clean (exit status 0)."""
+    from conftest import REPO, SAFETY_TIMEOUT, process_alive
+
+    process = subprocess.Popen([sys.executable, "-c", _RESPAWN], cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)},
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        lines = []
+
+        def until(predicate):
+            while not predicate():
+                line = process.stdout.readline()
+                assert line, f"launcher ended early: {lines} {process.stderr.read()}"
+                lines.append(line.rstrip("\n"))
+
+        until(lambda: lines.count("[flaky] up") == 1 and "[steady] ready" in lines)
+        started = {l.split()[2].rstrip(":"): int(l.split()[-1]) for l in lines if l.startswith("[launch] started")}
+        os.kill(started["flaky"], signal.SIGKILL)
+        killed = time.monotonic()
+        until(lambda: lines.count("[flaky] up") == 2)
+        assert time.monotonic() - killed >= 0.3
+        assert "[launch] flaky ended by itself (signal SIGKILL); respawning it in 0.3 s (respawn 1)" in lines
+        again = [int(l.split()[-1]) for l in lines if l.startswith("[launch] started flaky")]
+        assert len(again) == 2 and again[1] != started["flaky"] and process_alive(again[1])
+        assert process_alive(started["steady"])
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=SAFETY_TIMEOUT)
+        assert process.returncode == 0, (lines, out, err)
+        assert not process_alive(again[1]) and not process_alive(started["steady"])
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
 
 
 def test_supervisor_escalates_and_leaves_no_grandchild():

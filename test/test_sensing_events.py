@@ -182,21 +182,47 @@ def test_a_host_stall_delays_packets_without_moving_an_event(stall_at):
     assert shift <= CONFIG.estimator.clock_drift_rate * stall + 1e-6     # the offset's slew during the stall
 
 
-def test_a_jump_of_the_stamps_in_flight_loses_the_track_instead_of_timing_an_event():
-    """States whose stamps jump (the host clock stepped) early in an ascent: no apex is timed
-    across the jump; the detector follows the robot again from a later flight."""
+def _stepped(jump: float, missing: int = 0):
+    """The clean replay's estimates with the stamps moved by `jump` from early in the first ascent
+    (the flight fit has 10 to 20 samples: ready, unchecked), `missing` states left out there; the
+    events published, their times mapped back to the clean stamps."""
     rec, clean = default_replay(5.0, 2)
     liftoff = next(e for e in clean.events if e.kind is EventType.LIFTOFF)
-    jump_at, jump = liftoff.time + 0.016, 0.12       # the flight fit has 10 to 20 samples: ready, unchecked
+    jump_at = liftoff.time + 0.016
     detector = EventDetector(PARAMS, CONFIG.detector)
-    events = []
+    events, skipped = [], 0
     for sequence in sorted(clean.estimates):
         e = clean.estimates[sequence]
-        if e.stamp >= jump_at:
+        jumped = e.stamp >= jump_at
+        if jumped:
+            if skipped < missing:
+                skipped += 1
+                continue
             e = dataclasses.replace(e, stamp=e.stamp + jump, mcu_time=e.mcu_time + jump)
         events += [dataclasses.replace(ev, time=ev.time - jump, detected_at=ev.detected_at - jump)
-                   if ev.detected_at >= jump_at + jump else ev for ev in detector.update(e)]
-    assert detector.counters["track_lost"] >= 1
+                   if jumped else ev for ev in detector.update(e)]
+    return rec, clean, detector, events, jump_at
+
+
+@pytest.mark.parametrize("jump", [0.12, -0.04])
+def test_a_step_of_the_stamps_between_consecutive_states_is_followed(jump):
+    """Issue 29: the estimator re-anchors its clock mapping (the simulated robot skipped time, the
+    first packets came late, the host clock stepped): the stamps step between two states one sample
+    period apart. The robot did not move: every event is still found, on time, published on the new
+    mapping (the detector lost its track there, missed the stance and the robot fell)."""
+    rec, clean, detector, events, _ = _stepped(jump)
+    assert detector.counters["stamp_steps"] == 1
+    assert [(e.kind, e.stride_index) for e in events] == [(e.kind, e.stride_index) for e in clean.events]
+    assert np.abs(np.array([e.time for e in events]) - [e.time for e in clean.events]).max() < 1e-6
+
+
+def test_a_jump_of_the_stamps_with_samples_missing_loses_the_track():
+    """States whose stamps jump where samples are missing too (not one period apart by their
+    sequence numbers): no apex is timed across the jump; the detector follows the robot again from a
+    later flight."""
+    jump = 0.12
+    rec, clean, detector, events, jump_at = _stepped(jump, missing=10)
+    assert detector.counters["track_lost"] >= 1 and detector.counters["stamp_steps"] == 0
     # every event published is a true one within 2 ms (times mapped back across the jump), and none is
     # timed in the stamps of before the jump while published after it (an apex "seen" 70 ms early)
     report = match_events(truth_of(rec), detected_in_sim_time(events))

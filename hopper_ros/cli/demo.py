@@ -37,6 +37,10 @@ STARTUP_TIMEOUT = 60.0   # [s] until the graph is up
 STOP_TIMEOUT = 20.0      # [s] for the launcher to stop everything
 MONITOR_DEPTH = 200      # queue of each topic the demo follows (events: ~10 per second)
 MONITOR_PRIORITY = 10    # SCHED_FIFO of this process with demo.launch.yaml (its nodes: 50)
+HEALTH_WAIT = 1.2        # [s] after the last stride, for every node's diagnostics (periods <= 1 s) of the whole run
+HEALTH_SETTLE = 1.0      # [s] diagnostics periods (<= 1 s) ending this long after the throw are the run's
+DRAIN_BEFORE_THROW = 0.2  # [s] the monitor takes what the nodes reported before it snapshots their counters
+HEALTH_NODES = ("sim_robot", "motor_driver", "state_estimator", "event_detector", "deadbeat_controller")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -85,8 +89,9 @@ def main(args: argparse.Namespace) -> int:
                                 stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
     rows: list[StrideRow] = []
     problem = ""
+    health: dict = {}
     try:
-        rows, problem = _follow(args, launcher)
+        rows, problem = _follow(args, launcher, health)
     except KeyboardInterrupt:
         problem = "interrupted"
     finally:
@@ -95,6 +100,7 @@ def main(args: argparse.Namespace) -> int:
     if status != 0 and not problem:
         problem = f"the graph did not stop cleanly (launcher exit status {status}; see {log_path})"
     _report(rows, out)
+    _report_health(health, out)
     if problem:
         print(f"demo: FAILED: {problem}", flush=True)
         return 1
@@ -114,7 +120,7 @@ def _stop(launcher: subprocess.Popen) -> int:
         return -9
 
 
-def _follow(args, launcher) -> tuple[list[StrideRow], str]:
+def _follow(args, launcher, health: dict) -> tuple[list[StrideRow], str]:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -130,7 +136,8 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    seen = {"state": 0, "enabled": False, "falls": 0, "setpoint": None, "commands": {}, "apexes": [], "touchdowns": {}}
+    seen = {"state": 0, "enabled": False, "falls": 0, "setpoint": None, "commands": {}, "apexes": [], "touchdowns": {},
+            "health": {}, "at_throw": {}, "thrown": math.inf, "gap_max": {}}
 
     def on_event(msg):
         if msg.type == GaitEvent.TOUCHDOWN:
@@ -141,8 +148,13 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
 
     def on_diagnostics(msg):
         for status in msg.status:
-            if split_node_name(status.name) == ("/", "sim_robot"):
-                seen["falls"] = status_values(status).get("falls", seen["falls"])
+            namespace, name = split_node_name(status.name)
+            if namespace == "/" and name in HEALTH_NODES:
+                values = seen["health"][name] = status_values(status)
+                if name == "sim_robot":
+                    seen["falls"] = values.get("falls", seen["falls"])
+                if time.monotonic() > seen["thrown"] + HEALTH_SETTLE and "command_gap_period_max_s" in values:
+                    seen["gap_max"][name] = max(seen["gap_max"].get(name, 0.0), values["command_gap_period_max_s"])
 
     best_effort = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
     start_up = [node.create_subscription(BodyState, "body_state", lambda m: seen.__setitem__("state", seen["state"] + 1),
@@ -169,12 +181,16 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
             executor.spin_once(timeout_sec=0.05)
         for subscription in start_up:          # 1 kHz topics: not needed any more, spare the CPU
             node.destroy_subscription(subscription)
+        drained = time.monotonic() + DRAIN_BEFORE_THROW        # every report sent so far, before the snapshot
+        while time.monotonic() < drained:
+            executor.spin_once(timeout_sec=0.05)
         setpoint = seen["setpoint"]
         print(f"demo: graph up in {time.monotonic() - started:.1f} s; throwing the robot to apex "
               f"{setpoint.apex_height:.2f} m at {setpoint.forward_speed:.2f} m/s", flush=True)
         throw.publish(ApexState(apex_height=setpoint.apex_height, forward_speed=setpoint.forward_speed,
                                 leg_angle=_neutral_angle(setpoint.forward_speed)))
-        thrown = time.monotonic()
+        thrown = seen["thrown"] = time.monotonic()
+        seen["at_throw"] = {name: dict(values) for name, values in seen["health"].items()}
         rows: list[StrideRow] = []
         handled = 0
         print(f"{'stride':>6} {'time s':>7} {'height m':>9} {'target':>7} {'speed m/s':>9} {'target':>7} "
@@ -203,11 +219,63 @@ def _follow(args, launcher) -> tuple[list[StrideRow], str]:
                       f"{row.forward_speed:9.3f} {row.target_speed:7.2f} {row.tau_0:8.2f} "
                       f"{math.degrees(row.touchdown_angle):7.1f}d {math.degrees(row.touchdown_angle_actual):6.1f}d "
                       f"{row.touchdown_seen_after * 1e3:10.2f}", flush=True)
-        return rows, ""
+        settle = time.monotonic() + HEALTH_WAIT          # every node's diagnostics of the whole run
+        while time.monotonic() < settle and not seen["falls"]:
+            executor.spin_once(timeout_sec=0.05)
+        return rows, "the robot fell" if seen["falls"] else ""
     finally:
+        health.update(loop_health(seen["health"], seen["at_throw"], seen["gap_max"]))
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+def loop_health(health: dict, at_throw: dict | None = None, gap_max: dict | None = None) -> dict:
+    """How the loop did from the throw on, from the nodes' diagnostics (counters since they started,
+    less their values at the throw; `gap_max` the command gaps' longest per diagnostics period, from
+    HEALTH_SETTLE after the throw): late samples, stamp steps, ramps cancelled by the controller,
+    stance ramps the leg felt late or not at all, the command stream's gaps as the controller sent
+    and the driver received them (p99 over the node's life); NaN where a node did not report."""
+    at_throw, gap_max = at_throw or {}, gap_max or {}
+
+    def value(node, key):
+        now = health.get(node, {}).get(key, math.nan)
+        before = at_throw.get(node, {}).get(key, 0)
+        return now - before if isinstance(now, int) and isinstance(before, int) else now
+
+    samples = value("event_detector", "samples")
+    return {
+        "late_samples_pct": 100.0 * value("event_detector", "late_samples") / samples if samples else math.nan,
+        "stamp_steps": value("event_detector", "stamp_steps"),
+        "clock_anchors": value("state_estimator", "clock_anchors"),
+        "ramps_cancelled": value("deadbeat_controller", "touchdowns_missed"),
+        "stances": value("sim_robot", "stances"),
+        "stances_without_torque": value("sim_robot", "stances_without_torque"),
+        "stances_torque_late": value("sim_robot", "stances_torque_late"),
+        "torque_onset_max_ms": 1e3 * value("sim_robot", "torque_onset_max_s"),
+        "sim_resyncs": value("sim_robot", "resyncs"),
+        "published_gap_p99_ms": 1e3 * value("deadbeat_controller", "command_gap_p99_s"),
+        "published_gap_max_ms": 1e3 * gap_max.get("deadbeat_controller", value("deadbeat_controller", "command_gap_max_s")),
+        "command_gap_p99_ms": 1e3 * value("motor_driver", "command_gap_p99_s"),
+        "command_gap_max_ms": 1e3 * gap_max.get("motor_driver", value("motor_driver", "command_gap_max_s")),
+        "command_timeout_ms": 1e3 * value("motor_driver", "command_timeout_s"),
+        "watchdog_stops": value("motor_driver", "watchdog_stops"),
+        "ramp_held_syncs": value("motor_driver", "ramp_held_syncs"),
+    }
+
+
+def _report_health(health: dict, out: Path) -> None:
+    import json
+
+    if not health:
+        return
+    (out / "health.json").write_text(json.dumps(health, indent=1) + "\n", encoding="utf-8")
+    h = health
+    print(f"demo: loop: {h['late_samples_pct']:.2f} % late samples, {h['ramps_cancelled']} ramps cancelled, "
+          f"{h['stances_without_torque']} of {h['stances']} stances without the ramp, {h['stances_torque_late']} with "
+          f"it late (onset max {h['torque_onset_max_ms']:.1f} ms), command gaps p99 {h['command_gap_p99_ms']:.1f} / "
+          f"max {h['command_gap_max_ms']:.1f} ms (timeout {h['command_timeout_ms']:.0f} ms), "
+          f"{h['watchdog_stops']} watchdog stops", flush=True)
 
 
 def _neutral_angle(forward_speed: float) -> float:

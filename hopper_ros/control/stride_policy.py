@@ -14,6 +14,9 @@ instant out. The deadbeat_controller node wires its topics to it; the in-process
   then; the measured touchdown re-stamps it. No touchdown within `touchdown_grace` of the
   predicted one cancels the ramp (zero current, counted).
 - Single stride: `brake_disable_delay` after BRAKE began the drive is disabled (the robot sits back).
+- Hopping (past the first apex), no gait event for `sensing_timeout` (longer than any phase lasts):
+  the sensing chain stopped or the robot lies still: the drive is disabled until events come again
+  (`on_sensing`), no torque from a stale state.
 - A command goes out when it changes and otherwise every `keep_alive` (`due`), which feeds the
   motor driver's watchdog.
 Times are seconds on one clock (the event stamps' clock); a caller may hand its own stamp of an
@@ -34,6 +37,8 @@ from .deadbeat import DeadbeatController, StrideDecision
 from .stride_machine import MODE_DISABLED, Phase, StrideMachine, StridePlan
 
 MODE_RAMP = 3   # MotorCommand.MODE_RAMP: the driver runs the ramp (2.32) from the stamp
+FAULT_ACKNOWLEDGE = 0.1   # [s] MODE_DISABLED this long after a drive fault before the first stride: the
+                          #   motor driver resets a fault once the stream acknowledged it (docs/motor_driver.md)
 
 
 @dataclass(frozen=True)
@@ -43,6 +48,9 @@ class StrideSettings:
     ramp_ahead: bool = False            # send the ramp at pre-touchdown, stamped with the predicted touchdown
     touchdown_grace: float = 0.02       # [s] no touchdown this long after the predicted one: ramp cancelled
     keep_alive: float = 0.003           # [s] an unchanged command is repeated this often
+    executor_timeout: float = 0.02      # [s] the node's executor silent this long: its repeats stop (stale state)
+    sensing_timeout: float = 0.5        # [s] no gait event this long while hopping: sensing lost, drive disabled
+    keep_alive_priority_boost: int = 10  # SCHED_FIFO priority of the node's repeating thread above its own
     brake_disable_delay: float = 0.5    # [s] single stride: braking this long, then the drive disabled
 
     @classmethod
@@ -78,7 +86,8 @@ class StridePolicy:
             self.machine.start_single_stride(StridePlan(tau_0, angle, math.inf))
         self.setpoint: tuple[float, float] | None = None
         self.last_decision: StrideDecision | None = None
-        self.counters = {"strides": 0, "infeasible": 0, "faults": 0, "commands": 0, "touchdowns_missed": 0}
+        self.counters = {"strides": 0, "infeasible": 0, "faults": 0, "commands": 0, "touchdowns_missed": 0,
+                         "sensing_lost": 0}
         self.events: list[tuple[str, str]] = []     # (logger level, text) for the caller's log
         self._touchdown: tuple[float, Any] = (math.nan, None)
         self._predicted_touchdown = math.nan
@@ -86,6 +95,9 @@ class StridePolicy:
         self._brake_since = math.nan
         self._last = (MODE_DISABLED, 0.0)
         self._last_sent = -math.inf
+        self._sensed = math.nan         # when the last gait event or apex came (the caller's clock)
+        self._acknowledge = -math.inf   # a drive fault before the first stride: MODE_DISABLED until then
+        self.sensing_lost = False
 
     @property
     def phase(self) -> Phase:
@@ -148,12 +160,27 @@ class StridePolicy:
     def on_liftoff(self, leg_angle: float) -> None:
         self.machine.on_liftoff(leg_angle)
 
+    def on_sensing(self, now: float) -> None:
+        """A gait event or an apex came at `now` (the clock of `command`): the sensing chain is alive."""
+        self._sensed = now
+        if self.sensing_lost:
+            self.sensing_lost = False
+            self.events.append(("info", "gait events again: the drive follows the strides once more"))
+
     def on_drive_fault(self, message: str) -> bool:
         """The motor driver reports a drive fault or a lost drive: hold the leg, no torque. False
-        when the stride is in the safe state already."""
+        when the stride is in the safe state already. Before the first apex (no stride yet: the robot
+        held, waiting for its throw) it is reported and nothing latches: the driver keeps a faulted
+        drive off itself, and a start-up that failed once (the simulated robot's hub not up yet) left
+        the controller safe, its drive disabled, and the demo waiting for an enabled drive forever."""
         if self.machine.phase is Phase.SAFE:
             return False
         self.counters["faults"] += 1
+        if self.machine.phase in (Phase.IDLE, Phase.INITIALISE):
+            self.events.append(("error", f"motor driver: {message} (no stride yet: acknowledged, the leg is held "
+                                         "once the drive is back)"))
+            self._acknowledge = math.inf        # MODE_DISABLED for FAULT_ACKNOWLEDGE, the driver's cue to reset a fault
+            return True
         self.machine.fault(f"motor driver: {message}")
         self.events.append(("error", self.machine.reason))
         return True
@@ -162,6 +189,20 @@ class StridePolicy:
     def command(self, now: float, now_stamp: Any = None) -> Command:
         """The motor command for the instant `now`."""
         machine, s = self.machine, self.settings
+        if (machine.phase not in (Phase.IDLE, Phase.INITIALISE, Phase.BRAKE) and now - self._sensed > s.sensing_timeout
+                and not self.sensing_lost):
+            # hopping, and no event for longer than any phase lasts: the sensing chain stopped (a node died)
+            # or the robot lies still. No torque from a stale state: the drive off until events come again
+            self.sensing_lost = True
+            self.counters["sensing_lost"] += 1
+            self.events.append(("error", f"no gait event for {s.sensing_timeout * 1e3:.0f} ms while hopping: "
+                                         "sensing lost, drive disabled"))
+        if self.sensing_lost:
+            return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp)
+        if self._acknowledge == math.inf:
+            self._acknowledge = now + FAULT_ACKNOWLEDGE
+        if now < self._acknowledge:
+            return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp)
         mode, setpoint = machine.command(now)
         if machine.phase is Phase.BRAKE:
             if math.isnan(self._brake_since):

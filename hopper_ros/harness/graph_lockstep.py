@@ -8,12 +8,18 @@ CANopen master on the same virtual bus) -> CAN frames that the emulated drive ta
 period. Each module sees exactly what its node would, minus the transport delays; a run is
 deterministic and many times faster than real time. Used by the tests
 to check the loop end to end (signs, units, timing) and by the benchmarks.
+
+The host clock: the packet sampled at simulated time t reaches the sensing chain at host time
+t + `host_delay(t)` (default 0; non-decreasing in t + delay). The controller and the motor driver's
+command ages run on it, as the nodes run on the host's clock: a step of the delay is the simulated
+robot skipping time (stalled beyond sim/runner.py's RESYNC_PERIODS), a large delay of the first
+packets a late start (issue 29). `GraphRun.stances` is the stance ramp as the leg felt it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Iterable
+from typing import Callable, Iterable
 
 import can
 
@@ -24,6 +30,7 @@ from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.sensing.pipeline import SensingPipeline
 from hopper_ros.sensing.samples import EventType
 from hopper_ros.sim.robot import SimRobot
+from hopper_ros.sim.stance import StanceTorque
 
 from hopper_ros.control.deadbeat import DeadbeatController, StrideDecision
 from hopper_ros.control.stride_policy import StridePolicy, StrideSettings
@@ -37,13 +44,16 @@ class GraphRun:
     apexes: list[tuple[float, float, float]] = field(default_factory=list)       # (time, height, speed) detected
     true_apexes: list[tuple[float, float, float]] = field(default_factory=list)  # from the simulator
     fell: bool = False
+    stances: StanceTorque = field(default_factory=StanceTorque)
 
 
 class GraphLockstep:
     """Simulated robot + sensing + controller + motor driver, stepped together."""
 
     def __init__(self, sim_config, hardware: HardwareConfig, controller: DeadbeatController,
-                 driver_settings: DriverSettings | None = None, stride_settings: StrideSettings | None = None) -> None:
+                 driver_settings: DriverSettings | None = None, stride_settings: StrideSettings | None = None,
+                 host_delay: Callable[[float], float] = lambda t: 0.0) -> None:
+        self.host_time = 0.0          # [s] the graph's clock (the nodes' host clock)
         channel = f"graph_lockstep_{next(_CHANNELS)}"
         self._drive_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self._master_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
@@ -52,9 +62,10 @@ class GraphLockstep:
         self.sensing = SensingPipeline.from_files(hardware=hardware)
         self.controller = controller
         self.policy = StridePolicy(controller, stride_settings or StrideSettings())
+        self.host_delay = host_delay
 
     def _now(self) -> float:
-        return self.robot.t
+        return self.host_time
 
     def close(self) -> None:
         self._drive_bus.shutdown()
@@ -69,25 +80,41 @@ class GraphLockstep:
 
     def step(self, run: GraphRun) -> None:
         sample = self.robot.step()
+        run.stances.add(sample, self.robot.current_mode)
         for event in sample.events:
             if event.kind == "apex":
                 run.true_apexes.append((event.t, event.z, event.ydot))
             elif event.kind == "fall":
                 run.fell = True
-        output = self.sensing.process(packet_format.encode(sample.packet), sample.truth.t)
+        period = self.robot.period
+        arrival = max(self.host_time, sample.truth.t + self.host_delay(sample.truth.t))
+        while arrival - self.host_time > 1.5 * period:
+            # the simulated robot was frozen (or its packet late): the graph runs on without samples,
+            # the controller repeating its command, the driver sending SYNC to a drive that does not answer
+            self.host_time += period
+            self._command()
+            self._cycle()
+        self.host_time = arrival
+        output = self.sensing.process(packet_format.encode(sample.packet), self.host_time)
         for event in output.events:
             self._on_event(event, run)
-        if output.estimates:                    # the node's keep-alive timer, here at every estimate
-            now = output.estimates[-1].stamp
-            command = self.policy.command(now)
-            if self.policy.due(command, now):
-                self.driver.command(command.mode, command.setpoint, command.duration, self._now() - command.time)
-            self.policy.drain_events()
+        self._command()                          # the node's repeats: a thread of their own, every period here
+        self._cycle()
+
+    def _command(self) -> None:
+        now = self.host_time
+        command = self.policy.command(now)
+        if self.policy.due(command, now):
+            self.driver.command(command.mode, command.setpoint, command.duration, now - command.time)
+        self.policy.drain_events()
+
+    def _cycle(self) -> None:
         self.driver.cycle()
         while (frame := self._master_bus.recv(timeout=0.0)) is not None:
             self.driver.handle(frame)
 
     def _on_event(self, event, run: GraphRun) -> None:
+        self.policy.on_sensing(self.host_time)
         state = event.state
         if event.kind is EventType.APEX:
             run.apexes.append((event.time, state.z, state.y_dot))

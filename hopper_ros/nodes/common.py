@@ -7,14 +7,17 @@ A node module defines its `rclpy.node.Node` subclass (a thin adapter over a plai
 
 `run_node` applies the ROS environment (loopback-only discovery unless the user chose a range),
 initialises rclpy with `args` (None: `sys.argv`, so `--ros-args ...` work as with `ros2 run`),
-puts the process on SCHED_FIFO when HOPPER_REALTIME_PRIORITY asks (hopper_ros.environment),
-builds the node, logs its startup (pid, domain id, discovery range; scheduling) and spins it on rclpy's
+builds the node (with normal scheduling: a respawned node's start-up must not starve the running
+loop), puts every thread of the process on SCHED_FIFO when HOPPER_REALTIME_PRIORITY asks
+(hopper_ros.environment), logs its startup (pid, domain id, discovery range; scheduling), freezes the start-up's
+objects for the garbage collector (gc.freeze: a full collection walked all of them, a 50 ms pause of
+every thread; a pause over GC_PAUSE_WARNING is logged) and spins it on rclpy's
 EventsExecutor (HOPPER_EXECUTOR=single: the SingleThreadedExecutor). The events executor costs a
 fraction of the CPU per message: measured on the demo graph at 1 kHz, 150 % of a core in all
 instead of 190 %, the event detector and the controller at 13 % instead of 30 %. It has no guard
 conditions, so a stop signal is seen within `_EVENTS_SPIN_PERIOD`. SIGINT and SIGTERM both end the spin (unless the parent process had
 set them to be ignored), and so does a node setting its attribute `finished` (its work is done;
-seen at the next wake-up of the executor); the node is destroyed, rclpy shut down and 0 returned. A node that cannot start (bad configuration) or whose callback raises makes
+seen at the next wake-up of the executor; with `failed` set too, the status is 1); the node is destroyed, rclpy shut down and 0 returned. A node that cannot start (bad configuration) or whose callback raises makes
 it return 1.
 """
 
@@ -24,11 +27,12 @@ import gc
 import os
 import signal
 import sys
+import time
 import traceback
 from typing import Any, Callable, Sequence
 
 from hopper_ros.environment import (RosEnvironmentError, apply_realtime_priority, apply_ros_environment,
-                                    dds_network)
+                                    dds_network, realtime_priority)
 from hopper_ros.nodes.signals import StopSignals
 
 _SPIN_PERIOD = 1.0  # [s] the executor wakes at least this often (belt and braces, see StopSignals)
@@ -36,6 +40,33 @@ _EVENTS_SPIN_PERIOD = 0.1  # [s] with the events executor (no guard conditions):
 
 
 _ACTIVE_STOP: StopSignals | None = None
+GC_PAUSE_WARNING = 0.005  # [s] a garbage collection longer than this is logged (it holds every thread of the node)
+
+
+class GcPauses:
+    """The garbage collector's pauses (gc.callbacks): the longest since `take()`. Python's full
+    collection walks every object of the process, ~50 ms in a node (rclpy, numpy, scipy, the
+    model), more in a container: it stops every thread, the 1 kHz loop and the command stream with
+    it. run_node freezes the objects of the start-up (gc.freeze) so that it walks only the few made
+    since (issue 29: such pauses made the motor command stream's 20 ms gaps)."""
+
+    def __init__(self) -> None:
+        self.longest, self.generation = 0.0, -1
+        self._started = 0.0
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self._started = time.perf_counter()
+        else:
+            pause = time.perf_counter() - self._started
+            if pause > self.longest:
+                self.longest, self.generation = pause, info.get("generation", -1)
+
+    def take(self) -> tuple[float, int]:
+        """(the longest pause [s], its generation) since the last call."""
+        taken = self.longest, self.generation
+        self.longest, self.generation = 0.0, -1
+        return taken
 
 
 def read_only_parameters(node) -> Callable[[str, Any, str], Any]:
@@ -44,6 +75,19 @@ def read_only_parameters(node) -> Callable[[str, Any, str], Any]:
 
     return lambda name, default, text: node.declare_parameter(
         name, default, ParameterDescriptor(description=text, read_only=True)).value
+
+
+def log_event(logger, level: str, text: str) -> None:
+    """Log `text` at `level` ("info", "warning", "error"). One call site per level: rclpy ties each
+    call site to the severity of its first call and raises ValueError on another ("Logger severity
+    cannot be changed between calls"): `getattr(logger, level)(text)` on one line crashed the
+    controller the first time a warning followed an error (issue 29: the robot fell)."""
+    if level == "error":
+        logger.error(text)
+    elif level == "warning":
+        logger.warning(text)
+    else:
+        logger.info(text)
 
 
 def sensing_parameters(node):
@@ -97,7 +141,7 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
     `spinning()`, if any, is called once they are added)."""
     try:
         apply_ros_environment()
-        scheduling = apply_realtime_priority()   # before rclpy: its threads inherit the policy
+        realtime_priority()          # checked now; applied once the node is built (below)
     except RosEnvironmentError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -114,6 +158,7 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
     nodes, half_built = [], []
     executor = None
     status = 0
+    pauses = GcPauses()
     try:
         rclpy.init(args=list(args) if args is not None else None, signal_handler_options=SignalHandlerOptions.NO)
         if stop.received is None:
@@ -127,13 +172,23 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
                 f"started: pid {os.getpid()}, ROS_DOMAIN_ID {node.context.get_domain_id()}, "
                 f"discovery range {dds_network()}"
             )
-            node.get_logger().info(f"scheduling: {scheduling}")
             for each in nodes:
                 executor.add_node(each)
+            gc.collect()
+            gc.freeze()              # the start-up's objects are never walked again (GcPauses)
+            gc.callbacks.append(pauses)
+            # SCHED_FIFO only now, for every thread there (rclpy's, DDS's, the node's; later ones inherit it):
+            # the imports and construction (a second of CPU) ran with normal scheduling. A node respawned
+            # at FIFO priority starved the running loop of the same or lower priority while it started
+            node.get_logger().info(f"scheduling: {apply_realtime_priority()}")
             getattr(built, "spinning", lambda: None)()
+            logger = node.get_logger()
             while (stop.received is None and node.context.ok()
                    and not any(getattr(each, "finished", False) for each in nodes)):
                 executor.spin_once(timeout_sec=spin_period)
+                if pauses.longest > GC_PAUSE_WARNING:
+                    pause, generation = pauses.take()
+                    logger.warning(f"garbage collection (generation {generation}) held the node {pause * 1e3:.1f} ms")
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as exc:  # noqa: BLE001 - a node's failure is reported, then we clean up
@@ -148,7 +203,11 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
     finally:
         if stop.received is not None and node is not None:
             node.get_logger().info(f"stopping on {signal.Signals(stop.received).name}")
+        if stop.received is None and any(getattr(each, "failed", False) for each in nodes):
+            status = 1               # ended by itself, but not because its work was done (nor asked to stop)
         stop.detach()
+        if pauses in gc.callbacks:
+            gc.callbacks.remove(pauses)
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)
         for each in reversed(nodes):

@@ -59,7 +59,8 @@ def parse_components(text: str) -> list[dict]:
 
 
 class Composition(list):
-    """The container node first, then the composed nodes; `spinning()` flushes early messages."""
+    """The container node first, then the composed nodes; `spinning()` flushes early messages and
+    tells each node that its executor runs (as run_node does for a node alone)."""
 
     def __init__(self, components: list[dict], context=None):
         super().__init__()
@@ -84,6 +85,8 @@ class Composition(list):
 
     def spinning(self) -> None:
         self.bus.flush()
+        for node in self[1:]:
+            getattr(node, "spinning", lambda: None)()
 
 
 def main(args=None) -> int:

@@ -18,8 +18,11 @@ Stance ramp timing (control.yaml `stride`, beyond the thesis: `ramp_ahead`, `tou
 hopper_ros/control/stride_policy.py.
 
 A MotorCommand goes out at once when an input changes it (apex, gait event, setpoint, fault) and
-is repeated every `keep_alive` otherwise (a timer), which feeds the motor driver's watchdog; the
-node needs no state estimates, so it wakes at 333 Hz instead of with every 1 kHz sample. In
+is repeated every `keep_alive` otherwise, which feeds the motor driver's watchdog: from a thread
+of its own (hopper_ros.periodic, SCHED_FIFO `keep_alive_priority_boost` above the node), on time
+whatever the executor is busy with, as long as the executor itself ran within `executor_timeout`
+(control.yaml; a stuck executor stops the stream and the driver disables the drive). The node
+needs no state estimates, so it wakes at 333 Hz instead of with every 1 kHz sample. In
 stance it is MODE_RAMP stamped with the touchdown time: the driver computes the ramp's current
 every SYNC period itself, so delays and jitter of the command stream (seven Python processes on
 two cores) neither shift nor stretch it; the stride phase advances on `gait_event`. The whole
@@ -36,6 +39,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
@@ -46,15 +51,18 @@ from hopper_ros.control.config import load_control
 from hopper_ros.control.deadbeat import DeadbeatController, StrideDecision
 from hopper_ros.control.stride_machine import Phase
 from hopper_ros.control.stride_policy import StridePolicy
+from hopper_ros.gaps import GapHistogram
+from hopper_ros.periodic import PeriodicThread
 from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
-from hopper_ros.nodes.common import read_only_parameters, run_node
+from hopper_ros.nodes.common import log_event, read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import (DIAGNOSTICS_TOPIC, ERROR, OK, WARN, DiagnosticsReporter, level_of,
                                           split_node_name)
-from hopper_ros.nodes.stamps import to_seconds, to_stamp
+from hopper_ros.nodes.stamps import now_seconds, to_seconds, to_stamp
 
 SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+WARM_UP_SETPOINT = (0.39, 2.0)   # [m, m/s] a typical stride, decided once at start-up and forgotten
 
 
 class DeadbeatControllerNode(Node):
@@ -77,6 +85,9 @@ class DeadbeatControllerNode(Node):
             settings = dataclasses.replace(settings, adaptation=adaptation == "true")
         self.params = load_model(model_file)
         self.controller = DeadbeatController(self.params, settings)
+        # the decision's first call pays for imports and first uses (~10 ms, 0.3 s on a starved CPU): paid
+        # here, on a controller of its own, before the command stream begins
+        DeadbeatController(self.params, settings).prime(*WARM_UP_SETPOINT)
         if self.experiment == "single_stride":
             if not (math.isfinite(tau_0) and math.isfinite(touchdown_angle)):
                 raise ValueError("experiment:=single_stride needs the parameters tau_0 and touchdown_angle")
@@ -93,35 +104,52 @@ class DeadbeatControllerNode(Node):
         self.create_subscription(GaitEvent, "gait_event", self._on_event, 10)
         self.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diagnostics, 10)
         self.create_timer(1.0, self._report)
-        self.create_timer(keep_alive, self._send)
         self._command = MotorCommand()
+        self.published_gaps = GapHistogram()       # the command stream as this node sends it
+        self._published = math.nan
+        # The repeats come from a thread of their own (hopper_ros.periodic): an executor timer waited
+        # behind every callback of the process (in the demo's container, the 1 kHz sensing chain's) and
+        # the stream had gaps of 10-30 ms under load. They go on only while this node's executor is
+        # alive (`_tick`, every quarter of executor_timeout): a stuck executor stops them.
+        self._lock = threading.RLock()             # the policy and the publisher: callbacks and the thread
+        self._executor_timeout = self.policy.settings.executor_timeout
+        self._executor_seen = time.monotonic()
+        self._stale = False
+        self.create_timer(self._executor_timeout / 4, self._tick)
+        self._repeater = PeriodicThread(keep_alive, self._repeat, self.policy.settings.keep_alive_priority_boost,
+                                        "command-repeat", self._repeat_failed)
         s = self.controller.settings
         self.get_logger().info(
             f"{self.experiment}: predictor {s.predictor}, adaptation {'on' if s.adaptation else 'off'}, model {model_file}")
 
     # ------------------------------------------------------------------ inputs
     def _on_setpoint(self, msg: ApexState) -> None:
-        self.policy.on_setpoint(msg.apex_height, msg.forward_speed)
-        self.get_logger().info(f"setpoint: apex {msg.apex_height:.3f} m at {msg.forward_speed:.2f} m/s")
-        self._send()
+        with self._lock:
+            self.policy.on_setpoint(msg.apex_height, msg.forward_speed)
+            self.get_logger().info(f"setpoint: apex {msg.apex_height:.3f} m at {msg.forward_speed:.2f} m/s")
+            self._send()
 
     def _on_apex(self, msg: ApexState) -> None:
-        decision = self.policy.on_apex(msg.apex_height, msg.forward_speed, msg.stride_index)
-        if decision is not None:
-            self._publish_decision(decision)
-        self._send()
+        with self._lock:
+            self.policy.on_sensing(now_seconds(self))
+            decision = self.policy.on_apex(msg.apex_height, msg.forward_speed, msg.stride_index)
+            if decision is not None:
+                self._publish_decision(decision)
+            self._send()
 
     def _on_event(self, msg: GaitEvent) -> None:
         when, s = to_seconds(msg.header.stamp), msg.state
-        if msg.type == GaitEvent.PRE_TOUCHDOWN:
-            self.policy.on_pre_touchdown(when, s.z, s.z_dot, s.leg_angle, s.leg_angle_rate)
-        elif msg.type == GaitEvent.TOUCHDOWN:
-            self.policy.on_touchdown(when, msg.header.stamp)
-        elif msg.type == GaitEvent.LIFTOFF:
-            self.policy.on_liftoff(s.leg_angle)
-        else:
-            return
-        self._send()
+        with self._lock:
+            self.policy.on_sensing(now_seconds(self))
+            if msg.type == GaitEvent.PRE_TOUCHDOWN:
+                self.policy.on_pre_touchdown(when, s.z, s.z_dot, s.leg_angle, s.leg_angle_rate)
+            elif msg.type == GaitEvent.TOUCHDOWN:
+                self.policy.on_touchdown(when, msg.header.stamp)
+            elif msg.type == GaitEvent.LIFTOFF:
+                self.policy.on_liftoff(s.leg_angle)
+            else:
+                return
+            self._send()
 
     def _on_diagnostics(self, msg) -> None:
         """The motor driver reports a drive fault or a lost drive at once: hold the leg, no torque.
@@ -131,9 +159,42 @@ class DeadbeatControllerNode(Node):
         for status in msg.status:
             namespace, name = split_node_name(status.name)
             if namespace == self.get_namespace() and name.endswith("motor_driver") and level_of(status) == ERROR:
-                if self.policy.on_drive_fault(status.message):
-                    self._send()
+                with self._lock:
+                    if self.policy.on_drive_fault(status.message):
+                        self._send()
                 return
+
+    # ------------------------------------------------------------------ the repeats
+    def spinning(self) -> None:
+        """Its executor runs (run_node, the container): the repeats begin."""
+        self._executor_seen = time.monotonic()
+        self._repeater.start()
+
+    def _tick(self) -> None:
+        """The executor runs: the repeats may go on."""
+        self._executor_seen = time.monotonic()
+        if self._stale:
+            self._stale = False
+            self.get_logger().info("executor running again: motor commands resume")
+
+    def _repeat(self) -> None:
+        """The command for now, from the repeating thread, while the executor is alive."""
+        with self._lock:
+            if time.monotonic() - self._executor_seen > self._executor_timeout:
+                if not self._stale:
+                    self._stale = True
+                    self.get_logger().error(f"executor silent for more than {self._executor_timeout * 1e3:.0f} ms: "
+                                            "motor commands stop (the drive's watchdog disables it)")
+                return
+            self._send()
+
+    def _repeat_failed(self, exc: BaseException) -> None:
+        self.get_logger().error(f"motor command repeats ended: {type(exc).__name__}: {exc} (the drive's watchdog "
+                                "disables it)")
+
+    def destroy_node(self):
+        self._repeater.stop()
+        return super().destroy_node()
 
     # ------------------------------------------------------------------ outputs
     def _send(self) -> None:
@@ -146,8 +207,12 @@ class DeadbeatControllerNode(Node):
             msg.header.stamp = command.stamp if command.stamp is not None else to_stamp(command.time)
             msg.mode, msg.setpoint, msg.duration = command.mode, command.setpoint, command.duration
             self._command_pub.publish(msg)
+            published = time.monotonic()
+            if self._published == self._published:
+                self.published_gaps.add(published - self._published)
+            self._published = published
         for level, text in self.policy.drain_events():
-            getattr(self.get_logger(), level)(text)
+            log_event(self.get_logger(), level, text)
 
     def _publish_decision(self, decision: StrideDecision) -> None:
         msg = StrideCommand()
@@ -163,10 +228,17 @@ class DeadbeatControllerNode(Node):
         self._stride_pub.publish(msg)
 
     def _report(self) -> None:
+        with self._lock:
+            self._report_locked()
+
+    def _report_locked(self) -> None:
         decision, policy = self.policy.last_decision, self.policy
         values = {"bias_height_m": self.controller.bias_height, "bias_speed_m_s": self.controller.bias_speed,
                   "decision_time_s": decision.first_compute_time if decision else math.nan,
-                  "refine_time_s": decision.compute_time if decision else math.nan}
+                  "refine_time_s": decision.compute_time if decision else math.nan,
+                  "command_gap_p99_s": self.published_gaps.quantile(0.99), "command_gap_max_s": self.published_gaps.max,
+                  "command_gap_period_max_s": self.published_gaps.take_recent(),
+                  "repeat_late_max_s": self._repeater.late_max, "repeat_priority": self._repeater.priority}
         safe = policy.phase is Phase.SAFE
         self._diagnostics.report(policy.counters, values, policy.machine.reason if safe else "", WARN if safe else OK)
 

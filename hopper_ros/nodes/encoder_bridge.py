@@ -1,6 +1,7 @@
 """encoder_bridge: the microcontroller's UDP encoder packets onto ROS topics.
 
-A receiving thread of its own takes each datagram as it arrives and hands it to
+A receiving thread of its own takes each datagram as it arrives and hands it, with the kernel's
+stamp of its arrival (SO_TIMESTAMPNS; the thread's clock where the kernel gives none), to
 `hopper_ros.sensing.bridge.EncoderBridge` (checks: size, magic, version, CRC, sequence, clock;
 32-bit counters unwrapped; appendix A conversions; hip torque from the current). Every accepted
 packet is published at once (1 kHz) on
@@ -11,7 +12,8 @@ a rejected packet is counted and dropped, never published. `/diagnostics` (diagn
 DiagnosticArray, every `diagnostics_period`; hopper_ros.nodes.diagnostics): counters (packets_received, samples_accepted, packets_lost, malformed_*,
 duplicates, reordered, sequence_jump, clock_backwards, clock_inconsistent, stream_resyncs,
 counter_wraps) and values (sample_rate_hz, loss_ratio over the period, process_time_max_s,
-measurement_subscribers: the subscriptions body_measurement is matched with).
+socket_wait_max_s: the longest a packet waited in the socket for this node, measurement_subscribers:
+the subscriptions body_measurement is matched with).
 
 Parameters (read only):
   sensing_file (string): sensing settings, default `sensing.yaml` (config/sensing.yaml)
@@ -25,6 +27,7 @@ The logic lives in hopper_ros.sensing.bridge; this node only connects it to a so
 from __future__ import annotations
 
 import socket
+import struct
 import sys
 import threading
 import time
@@ -41,6 +44,26 @@ from hopper_ros.nodes.sensing_messages import (CounterDeltas, any_of, fill_body_
 
 RECEIVE_TIMEOUT = 0.2     # [s] the receiving thread checks for shutdown this often
 DATAGRAM_BUFFER = 2048    # [bytes] larger than any packet, so an oversized one shows its real size
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)   # Linux (asm-generic): the kernel stamps each datagram
+_TIMESPEC = struct.Struct("@qq")
+
+
+def kernel_timestamps(sock: socket.socket) -> bool:
+    """Ask the kernel to stamp every datagram on arrival (CLOCK_REALTIME); False where it cannot."""
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    except OSError:
+        return False
+    return True
+
+
+def arrival_time(ancillary) -> float | None:
+    """The kernel's arrival stamp of a datagram from recvmsg's ancillary data [s], None without one."""
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= _TIMESPEC.size:
+            seconds, nanoseconds = _TIMESPEC.unpack_from(data)
+            return seconds + nanoseconds * 1e-9
+    return None
 
 
 class EncoderBridgeNode(Node):
@@ -59,6 +82,8 @@ class EncoderBridgeNode(Node):
         self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, config.bridge.receive_buffer_bytes)
         self._socket.bind((host, int(port)))
         self._socket.settimeout(RECEIVE_TIMEOUT)
+        self._kernel_stamps = kernel_timestamps(self._socket)
+        self._socket_wait_max = 0.0
         self._address = self._socket.getsockname()
         self._sample_msg, self._measurement_msg = EncoderSample(), BodyMeasurement()
         qos = sample_qos(config.queue_depth)
@@ -82,16 +107,22 @@ class EncoderBridgeNode(Node):
     # ------------------------------------------------------------------ receiving thread
     def _receive(self) -> None:
         sock, bridge = self._socket, self.bridge
+        ancillary_size = socket.CMSG_SPACE(_TIMESPEC.size)
         while not self._stop.is_set():
             try:
-                datagram = sock.recv(DATAGRAM_BUFFER)
+                datagram, ancillary, _, _ = sock.recvmsg(DATAGRAM_BUFFER, ancillary_size)
             except socket.timeout:
                 continue
             except OSError:
                 if self._stop.is_set():
                     return
                 raise
-            received = time.time()
+            # the packet's arrival, not when this thread got to it: a bridge descheduled under load
+            # must not make its samples look late (their stamps come from it)
+            now = time.time()
+            received = arrival_time(ancillary) or now
+            if now - received > self._socket_wait_max:
+                self._socket_wait_max = now - received
             started = time.perf_counter()
             with self._lock:
                 sample = bridge.process(datagram, received)
@@ -117,9 +148,10 @@ class EncoderBridgeNode(Node):
             "sample_rate_hz": accepted / elapsed if elapsed > 0 else float("nan"),
             "loss_ratio": lost / (accepted + lost) if accepted + lost else 0.0,
             "process_time_max_s": self._process_time_max,
+            "socket_wait_max_s": self._socket_wait_max,
             "measurement_subscribers": float(self._measurements.get_subscription_count()),
         }
-        self._process_time_max = 0.0
+        self._process_time_max = self._socket_wait_max = 0.0
         new_problem = any_of(deltas, ("packets_lost", *MALFORMED, *ORDER))
         if new_problem and problem != self._reported_problem:
             self.get_logger().warning(problem)

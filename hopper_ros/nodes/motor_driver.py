@@ -14,7 +14,9 @@ Parameters (read only, given at start: the node offers no parameter services):
   command_timeout (double) [s]: no command this long -> quick stop, disable (default 0.02)
   sync_period (double) [s]: SYNC period (default 0.001)
 
-On SIGINT/SIGTERM the drive is disabled (confirmed by the drive) before the node goes away. The
+On SIGINT/SIGTERM the drive is disabled (confirmed by the drive) before the node goes away. A bus
+whose connection was closed by its other end (the simulated robot's socketcand hub killed) ends the
+node with status 1: respawned by its launch file, it connects again and configures the new drive. The
 logic lives in hopper_ros.canbus.driver (the driver and its 1 kHz CycleLoop); this node only
 connects it to ROS.
 """
@@ -40,6 +42,7 @@ from hopper_ros.nodes.common import read_only_parameters, run_node, stop_request
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.nodes.stamps import now_seconds, stamp_of_ns, to_seconds
 
+TRANSPORT_CHECK = 0.1    # [s] how often the node looks whether its bus's connection closed for good
 #: commands: the latest one matters (a stale one is worse than none); matches reliable publishers too
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 
@@ -100,6 +103,8 @@ class MotorDriverNode(Node):
         self._loop = CycleLoop(self._driver, self._lock, self._log, self._publish_status, self.get_logger().error,
                                status_decimation, config.status_period)
         self.create_timer(config.diagnostics_period, self._publish_diagnostics)
+        self.create_timer(TRANSPORT_CHECK, self._check_transport)
+        self.finished = self.failed = False
         self._loop.start()
         self.get_logger().info(
             f"motor driver on {self._bus.channel_info}: drive node {self._driver.node_id}, SYNC every "
@@ -113,6 +118,14 @@ class MotorDriverNode(Node):
             age = now_seconds(self) - to_seconds(msg.header.stamp)
         with self._lock:
             self._driver.command(msg.mode, msg.setpoint, msg.duration, age)
+
+    def _check_transport(self) -> None:
+        """The bus's connection closed for good (the simulated robot's hub went away, killed): this node
+        ends (status 1); respawned, it connects to the hub again and configures the drive it finds."""
+        if self._driver.transport_lost and not self.finished:
+            self.get_logger().error(f"CAN transport {self._bus.channel_info} closed by its other end: the drive is "
+                                    "out of reach, the node ends")
+            self.finished = self.failed = True
 
     def _publish_status(self) -> None:
         # One message, refilled: this runs on the CAN cycle thread at up to 1 kHz, and every
@@ -134,10 +147,13 @@ class MotorDriverNode(Node):
             level, message = self._driver.health()
             counters = [self._driver.counters[name] for name in COUNTER_NAMES]
             status = self._driver.status
-            values = [self._driver.settings.command_timeout, status.current, status.position]
+            gaps = self._driver.command_gaps
+            values = [self._driver.settings.command_timeout, status.current, status.position, gaps.quantile(0.99),
+                      gaps.max, gaps.take_recent()]
         self._diagnostics.report(
             {**dict(zip(COUNTER_NAMES, counters)), "cycle_overruns": self._loop.overruns},
-            dict(zip(["command_timeout_s", "current_a", "position_rad", "cycle_rate_hz"], [*values, self._loop.rate])),
+            dict(zip(["command_timeout_s", "current_a", "position_rad", "command_gap_p99_s", "command_gap_max_s",
+                      "command_gap_period_max_s", "cycle_rate_hz"], [*values, self._loop.rate])),
             message, {INFO: diagnostics.OK, WARN: diagnostics.WARN, ERROR: diagnostics.ERROR}[level])
 
     def _log(self, events) -> None:

@@ -7,7 +7,10 @@ Steps the physics once per 1 ms period in a thread of its own and, like the robo
   `can:=hub` serves the socketcand protocol on 127.0.0.1 (hardware.yaml `can.port`),
   `can:=virtual:CHANNEL` joins python-can's in-process virtual bus, `can:=none` has no drive
   (motor off);
-- publishes the force plate on `force_plate` (GroundReactionForce, 1 kHz).
+- publishes the force plate on `force_plate` (GroundReactionForce, 1 kHz);
+- watches each stance's ramp as the leg felt it (hopper_ros.sim.stance: `stances`,
+  `stances_without_torque`, `stances_torque_late`, `torque_onset_max_s` on `/diagnostics`, a warning
+  per stance without the ramp or with it more than 5 ms late).
 For tests and the mismatch tool it also publishes the ground truth: `sim/truth` (BodyState,
 1 kHz) and `sim/events` (GaitEvent, true event times). `sim/throw` (ApexState: apex_height,
 forward_speed, leg_angle, y) throws the robot to a new apex, as the researcher does by hand
@@ -45,6 +48,7 @@ from hopper_ros.nodes.stamps import stamp_of_ns
 from hopper_ros.sim.config import load_sim_config
 from hopper_ros.sim.robot import SimSample
 from hopper_ros.sim.runner import SimRunner
+from hopper_ros.sim.stance import StanceTorque
 
 EVENT_TYPES = {"apex": GaitEvent.APEX, "touchdown": GaitEvent.TOUCHDOWN, "bottom": GaitEvent.BOTTOM,
                "liftoff": GaitEvent.LIFTOFF}
@@ -97,6 +101,7 @@ class SimRobotNode(Node):
 
         self.finished = False                       # run_node ends the process once set
         self.counters = self.runner.counters
+        self.stances = StanceTorque()
         self._stamp_origin_ns = self.get_clock().now().nanoseconds
         effects = [f"{name} {value:g}" for name, value in config.enabled_effects().items()]
         address = self.runner.udp_address
@@ -131,10 +136,20 @@ class SimRobotNode(Node):
             state.y, state.z, state.y_dot, state.z_dot = truth.y, truth.z, truth.ydot, truth.zdot
             state.leg_angle, state.leg_angle_rate = truth.leg_angle, truth.leg_rate
             self._truth.publish(state)
+        stances = self.stances
+        closed = stances.stances
+        stances.add(sample, self.robot.current_mode)
+        if stances.stances > closed and not stances.onsets[-1] <= stances.late_after:
+            onset = stances.onsets[-1]
+            self.get_logger().warning(f"stance ending at t = {truth.t:.3f} s: " + (
+                "no ramp torque reached the leg" if onset != onset else
+                f"the ramp torque reached the leg {onset * 1e3:.1f} ms after the touchdown"))
         for event in sample.events:
             if event.kind == "fall":
                 self.counters["falls"] += 1
-                self.get_logger().warning(f"the robot fell at t = {event.t:.3f} s")
+                self.get_logger().warning(f"the robot fell at t = {event.t:.3f} s (simulated time; "
+                                          f"{self.runner.counters['resyncs']} resyncs, "
+                                          f"{self.runner.counters['deadline_misses']} deadline misses so far)")
                 continue
             if event.kind == "apex":
                 self.counters["strides"] += 1
@@ -157,8 +172,9 @@ class SimRobotNode(Node):
         self.get_logger().info(f"thrown to apex {msg.apex_height:.3f} m at {msg.forward_speed:.2f} m/s")
 
     def _report(self) -> None:
-        counters = self.runner.all_counters()
-        self._diagnostics.report(counters, {"sim_time_s": self.robot.t, "realtime_factor": self.runner.realtime_factor()},
+        counters = self.runner.all_counters() | self.stances.counters()
+        self._diagnostics.report(counters, {"sim_time_s": self.robot.t, "realtime_factor": self.runner.realtime_factor(),
+                                            "torque_onset_max_s": self.stances.onset_max},
                                  "the robot fell" if counters["falls"] else "", WARN if counters["falls"] else OK)
 
     def destroy_node(self):

@@ -73,7 +73,7 @@ class StateEstimatorNode(Node):
 
     def _report(self) -> None:
         now = time.time()
-        counters = dict(self.estimator.counters)
+        counters = dict(self.estimator.counters, clock_anchors=self.estimator.clock.anchors)
         deltas, elapsed = self._deltas.update(counters, now)
         values = {
             "sample_rate_hz": deltas["measurements"] / elapsed if elapsed > 0 else math.nan,

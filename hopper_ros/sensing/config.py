@@ -41,7 +41,8 @@ class EstimatorSettings:
     max_prediction_gap: float         # [s]
     clock_drift_rate: float           # [s/s]
     clock_max_error: float            # [s]
-    clock_reanchor_after: float       # [s] of microcontroller time
+    clock_max_lag: float              # [s]
+    clock_reanchor_after: float       # [s] of host time
 
 
 

@@ -36,8 +36,10 @@ predict and one update call per sample). Update in Joseph form, A.1.2 line 11 (f
   (the robot was moved by hand, the simulator threw it) restart the filter from the measurement.
 
 Host stamps: the state's instant on the host clock is mcu_time + offset, the offset following the
-lower envelope of (receive time - mcu time) by at most `clock_drift_rate`, re-anchored only after
-`clock_reanchor_after` seconds of packets all later than `clock_max_error` (`ClockOffset`).
+lower envelope of (receive time - mcu time) by at most `clock_drift_rate`, re-anchored, up or down,
+after `clock_reanchor_after` seconds of host time in which the packets all arrived more than
+`clock_max_error` late, or the envelope stayed `clock_max_lag` below it, at real-time pace
+(`ClockOffset`).
 """
 
 from __future__ import annotations
@@ -82,57 +84,84 @@ def _diagonal_inverse(matrix: np.ndarray) -> np.ndarray:
 
 class ClockOffset:
     """Host time minus microcontroller time, changing slowly so that stamps keep the
-    microcontroller's spacing.
+    microcontroller's spacing, never more than `max_error` early nor `max_lag` late for longer than
+    `reanchor_after`. A packet earlier than the mapping allows is proof, so the late side's bound is
+    tight (0.5 ms: the stance ramp's timing moves the apex ~2 mm per ms); lateness alone is not.
 
     A packet can only arrive after it was sampled, so the least-delayed packets bound the offset:
     `envelope` drops at once to a smaller (receive - mcu time) and otherwise rises by at most
     `max_drift_rate` seconds per second. The offset used for the stamps follows the envelope at
     that rate, up or down: stamp differences equal the microcontroller's to within the rate (the
-    event detector's flight fit relies on it). Only when every packet for `reanchor_after` seconds
-    of microcontroller time arrived more than `max_error` later than the offset says (the host
-    clock stepped forward, the stream runs slower than real time) is the offset re-anchored, to the
-    least delay of that span (`anchors`). A host that stalls for less (the bridge descheduled for
-    0.15 s, its packets then read in a burst) delays packets without moving the stamps: anchoring
-    on the first late packet shifted every later stamp by the stall, and a flight then looked 0.1 s
-    older than it was (an apex published 88 ms early, seen under load). Faster than real time (a
-    lockstep simulation) the stamps run ahead of the host clock instead of being compressed.
+    event detector's flight fit relies on it).
+
+    Re-anchoring, in both directions: when for `reanchor_after` seconds of host time every packet
+    arrived more than `max_error` later than the offset says (the simulated robot skipped time,
+    the host clock stepped forward), or the envelope stayed more than `max_lag` below it (the
+    first packets came late and the mapping was anchored on them, the host clock stepped back), the
+    offset jumps to the least delay of that span (`anchors` counts them). The span is host time, and
+    it starts again wherever the stream ran faster than real time (its microcontroller time
+    advancing more than `PACE` x the host's, plus `max_error`) or fell silent, so neither a burst
+    of packets queued while the host stalled (late, but read within milliseconds; the next ones are
+    on time) nor a lockstep simulation
+    (faster than real time: its stamps run ahead, spaced as the microcontroller's) moves the
+    mapping. After a silence longer than `reanchor_after` (no packet at all: the simulated robot
+    stalled) two late packets arriving as far apart as they were sampled are enough: the stream goes
+    on at its pace, later by the time it missed. Before issue 29 only packets 0.1 s late for 1 s of
+    microcontroller time re-anchored it and only upwards: a simulated robot that skipped 50-150 ms
+    left every stamp that much old for minutes (every stance ramp cancelled), late first packets
+    left them ahead (every ramp held).
     """
 
-    def __init__(self, max_drift_rate: float, max_error: float, reanchor_after: float) -> None:
+    PACE = 1.1   # [1] a span whose microcontroller time advanced faster than this x host time is no real-time stream
+
+    def __init__(self, max_drift_rate: float, max_error: float, reanchor_after: float,
+                 max_lag: float | None = None) -> None:
         self.max_drift_rate = max_drift_rate
         self.max_error = max_error
+        self.max_lag = max_error if max_lag is None else max_lag
         self.reanchor_after = reanchor_after
         self.offset = 0.0
         self.envelope = 0.0
         self.anchors = 0
         self._last_mcu: float | None = None
-        self._late_since: float | None = None    # mcu time of the first packet of an unbroken late span
-        self._late_least = math.inf              # its least delay
+        self._side = 0                           # +1: packets late beyond max_error, -1: envelope early beyond max_lag
+        self._since = (0.0, 0.0)                 # (mcu, receive time) of the span's first packet
+        self._least = math.inf                   # the span's least delay
+        self._last_receive = 0.0
+        self._after_silence: float | None = None  # delay of a late packet that ended a silence
 
     def update(self, mcu_time: float, receive_time: float) -> float:
         delay = receive_time - mcu_time
         if self._last_mcu is None:
             self._anchor(delay)
-        else:
-            if delay - self.offset > self.max_error:
-                if self._late_since is None:
-                    self._late_since, self._late_least = mcu_time, delay
-                self._late_least = min(self._late_least, delay)
-            else:
-                self._late_since = None
-            if self._late_since is not None and mcu_time - self._late_since >= self.reanchor_after:
-                self._anchor(self._late_least)
-            else:
-                step = self.max_drift_rate * max(0.0, mcu_time - self._last_mcu)
-                self.envelope = min(self.envelope + step, delay)
-                self.offset += max(-step, min(step, self.envelope - self.offset))
-        self._last_mcu = mcu_time
+            self._last_mcu, self._last_receive = mcu_time, receive_time
+            return self.offset
+        mcu_step, host_step = mcu_time - self._last_mcu, receive_time - self._last_receive
+        step = self.max_drift_rate * max(0.0, mcu_step)
+        self._last_mcu, self._last_receive = mcu_time, receive_time
+        self.envelope = min(self.envelope + step, delay)
+        side = 1 if delay - self.offset > self.max_error else -1 if self.offset - self.envelope > self.max_lag else 0
+        if side > 0 and self._after_silence is not None and mcu_step > 0.0 and host_step >= 0.5 * mcu_step:
+            # late after a silence, and the next packet came as far after it as it was sampled: the
+            # stream goes on at its pace (a burst of queued packets comes within microseconds)
+            self._anchor(min(self._after_silence, delay))
+            return self.offset
+        self._after_silence = delay if side > 0 and host_step > self.reanchor_after else None
+        if (side != self._side or host_step > self.reanchor_after
+                or mcu_time - self._since[0] > self.PACE * (receive_time - self._since[1]) + self.max_error):
+            # a new side, a silence, or faster than real time (a burst, lockstep): the span starts here
+            self._side, self._since, self._least = side, (mcu_time, receive_time), math.inf
+        self._least = min(self._least, delay if side > 0 else self.envelope)
+        if side and receive_time - self._since[1] >= self.reanchor_after:
+            self._anchor(self._least)
+            return self.offset
+        self.offset += max(-step, min(step, self.envelope - self.offset))
         return self.offset
 
     def _anchor(self, delay: float) -> None:
         self.offset = self.envelope = delay
         self.anchors += 1
-        self._late_since = None
+        self._side, self._least, self._after_silence = 0, math.inf, None
 
     def reset(self) -> None:
         self._last_mcu = None
@@ -166,7 +195,7 @@ class StateEstimator:
         self.kf.inv = _diagonal_inverse
         self._row_sets = {}   # accepted-axes mask -> (H, R) of those rows
         self.clock = ClockOffset(settings.clock_drift_rate, settings.clock_max_error,
-                                 settings.clock_reanchor_after)
+                                 settings.clock_reanchor_after, settings.clock_max_lag)
         self.counters = dict.fromkeys(COUNTER_NAMES, 0)
         self.last_problem = ""
         self.initialised = False

@@ -50,8 +50,12 @@ robot that may already be past it). A flight fit that misses the estimated heigh
 
 Time: every guard and fit runs on the states' host stamps, which keep the microcontroller's
 spacing (the estimator's clock mapping). Two states closer than zero or further apart than
-`max_state_spacing` mean the stamps jumped (the mapping re-anchored, the host clock stepped): the
-track is lost rather than a flight being timed across the jump.
+`max_state_spacing` mean the stamps jumped. When their sequence numbers say the second is the
+state one sample period after the first (the estimator publishes one per period), the mapping
+stepped (the estimator re-anchored it: the simulated robot skipped time, the host clock stepped)
+and the robot did not: the detector carries on in its own time (stamps minus the steps so far,
+`stamp_steps` counts them) and publishes events on the present mapping. Otherwise samples are
+missing as well and the track is lost rather than a flight being timed across the jump.
 
 Hysteresis: a flight counts (touchdown and apex armed) once the toe has risen
 `touchdown_arming_clearance` above the ground since the lift-off, a stance (lift-off armed) once
@@ -72,8 +76,9 @@ from .config import DetectorSettings
 from .samples import DetectedEvent, Estimate, EventType
 
 COUNTER_NAMES = ("samples", "untrusted_samples", "track_lost", "track_acquired", "strides",
-                 "apex", "pre_touchdown", "touchdown", "bottom", "liftoff")
+                 "apex", "pre_touchdown", "touchdown", "bottom", "liftoff", "stamp_steps")
 FLIGHT_FIT_MIN_SAMPLES = 10   # with flight_fit_settle: no apex is timed within 15 ms of a lift-off
+STEP_TOLERANCE = 1e-4         # [s] consecutive states whose spacing differs more from the last regular one: a step
 _NEWTON_STEPS = 8
 
 
@@ -235,6 +240,10 @@ class EventDetector:
         self._toe_y = math.nan
         self._bottom_candidate: tuple[float, Estimate] | None = None
         self._acquisition: deque[tuple[float, float]] = deque()   # (stamp, z) while unknown
+        self._shift = 0.0               # [s] the stamps' mapping steps so far: internal time = stamp - shift
+        self._spacing: float | None = None   # [s] the last regular spacing of two states (one sample period)
+        self._run = 0                   # states since the sequence number last changed (predictions)
+        self._last: tuple[int, float] | None = None   # (sequence, internal stamp) of the last state
 
     # ------------------------------------------------------------------ guards
     def toe_height(self, e: Estimate) -> float:
@@ -268,14 +277,42 @@ class EventDetector:
         if not self.trusted(e):
             self.counters["untrusted_samples"] += 1
             self._lose_track(f"estimate not trusted at sample {e.sequence}")
-            self._previous = None
+            self._previous = self._last = None
             return []
-        if self._previous is not None:
-            spacing = e.stamp - self._previous.stamp
-            if not 0.0 < spacing <= self.settings.max_state_spacing:
+        last = self._last
+        if last is not None:
+            sequence, stamp = last
+            step = (e.sequence - sequence) & 0xFFFFFFFF
+            # one sample period after the last state: the estimator publishes one per period, a
+            # prediction with the last sequence number used, a measurement with its own
+            follows = step == 0 or step == self._run + 1
+            self._run = self._run + 1 if step == 0 else 0
+            spacing = e.stamp - self._shift - stamp
+            regular = self._spacing is not None and abs(spacing - self._spacing) <= STEP_TOLERANCE
+            if 0.0 < spacing <= self.settings.max_state_spacing and (regular or not follows or self._spacing is None):
+                self._spacing = spacing
+            elif follows and self._spacing is not None:
+                # the stamps' mapping stepped (the estimator re-anchored it, the host clock stepped),
+                # the robot did not: carry on in internal time
+                self._shift += spacing - self._spacing
+                self.counters["stamp_steps"] += 1
+            else:
                 self._lose_track(f"sample {e.sequence} is {spacing * 1e3:.3f} ms after the last one "
-                                 f"(stamps jumped: host clock stepped or its mapping re-anchored)")
+                                 f"(stamps jumped and samples are missing)")
                 self._previous = None
+        self._last = (e.sequence, e.stamp - self._shift)
+        if self._shift:
+            e = dataclasses.replace(e, stamp=e.stamp - self._shift)
+        events = self._update(e)
+        return [self._external(event) for event in events] if self._shift else events
+
+    def _external(self, event: DetectedEvent) -> DetectedEvent:
+        """An event of internal time on the stamps' present mapping."""
+        shift = self._shift
+        return dataclasses.replace(event, time=event.time + shift, detected_at=event.detected_at + shift,
+                                   state=dataclasses.replace(event.state, stamp=event.state.stamp + shift))
+
+    def _update(self, e: Estimate) -> list[DetectedEvent]:
         events: list[DetectedEvent] = []
         if e.outlier_rejected:
             # A measurement failed the gate: no guard is evaluated on it. Only an apex that the

@@ -126,6 +126,11 @@ class SimRobot:
     def t(self) -> float:
         return self.plant.t
 
+    @property
+    def current_mode(self) -> bool:
+        """The hip is commanded a current (the stance ramp), not a position, or has no drive."""
+        return self.drive is None or self.drive.operation_mode == OperationMode.CURRENT
+
     # ------------------------------------------------------------------ one period
     def hip_torque(self, current: float) -> float:
         """The hip torque a motor current commands; the plant's actuator (`laws.actuator_torque`: gain,

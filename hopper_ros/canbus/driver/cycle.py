@@ -11,7 +11,7 @@ from typing import Callable
 
 import can
 
-from .driver import MotorDriver
+from .driver import MotorDriver, first_line
 
 Events = list[tuple[int, str]]
 
@@ -71,6 +71,9 @@ class CycleLoop:
                 with self.lock:
                     driver.cycle()
                     events = driver.drain_events()
+                if driver.transport_lost:
+                    self._on_events(events)
+                    return
                 self.cycles += 1
                 self._on_events(events)
                 next_cycle += period
@@ -95,7 +98,9 @@ class CycleLoop:
                         frame = bus.recv(timeout=remaining)
                     except (can.CanError, OSError, ValueError) as exc:
                         with self.lock:
-                            driver.bus_error(f"receive failed: {exc}")
+                            driver.bus_error(f"receive failed: {first_line(exc)}", exc)
+                        if driver.transport_lost:           # the hub went away: nothing will come any more
+                            return
                         time.sleep(max(0.0, next_cycle - time.monotonic()))
                         break
                     if frame is None:

@@ -50,6 +50,7 @@ from hopper_ros.canbus.master import (
     nmt_state_name,
     sync_frame,
 )
+from hopper_ros.gaps import GapHistogram
 from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.physics.laws import ramp_torque
 
@@ -62,6 +63,27 @@ from .units import DriveUnits
 
 RAMP_RESTAMP = 0.0005   # [s] a MODE_RAMP stamp moved by more than this re-anchors the running ramp (repeats of
                         #   one stamp differ by the command's transit jitter only)
+SILENT_SYNCS = 3        # this many SYNCs in a row the drive left unanswered: it is not running (the simulated
+                        #   robot's process stalled: sim/runner.py RESYNC_PERIODS): a running ramp is held until it
+                        #   answers again
+
+
+def connection_closed(exc: BaseException) -> bool:
+    """Whether a bus error is the transport's connection closed by its other end (a socketcand hub
+    that went away: reset, broken pipe): no later frame will pass, unlike a CAN error."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, (ConnectionResetError, BrokenPipeError, ConnectionAbortedError)):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def first_line(exc: BaseException) -> str:
+    """An exception's message without the traceback some python-can errors carry in it."""
+    text = str(exc).strip()
+    return text.split("Traceback (most recent call last)")[0].strip().splitlines()[0] if text else type(exc).__name__
 
 
 class Phase(str, Enum):
@@ -138,6 +160,8 @@ class MotorDriver:
         self._current_ma = 0                # its drive setpoints
         self._position_qc = 0
         self._last_command: float | None = None
+        self.command_gaps = GapHistogram()
+        self.transport_lost = False         # the connection to the bus closed for good (the socketcand hub went away)
         self._want_enabled = False
         self._quick_stop = False
         self._watchdog_at = -math.inf       # when the command watchdog last tripped
@@ -146,11 +170,15 @@ class MotorDriver:
         self._last_cw: int | None = None                                  # fault found at start-up is reset
         # cyclic exchange
         self._sent_since_sync: tuple[int, bytes] | None = None
-        self._ramp: tuple[float, float, float, float] | None = None   # MODE_RAMP: (tau_0, duration, start, stamp)
+        # MODE_RAMP: (tau_0, duration, start, stamp, held): start = the stamp (or later) + the time it was held
+        self._ramp: tuple[float, float, float, float, float] | None = None
         self._last_rpdo: tuple[int, bytes] | None = None   # the last RPDO sent and when
         self._last_rpdo_time = -math.inf
         self._tpdo_seen = 0                 # TPDOs received since the last SYNC (bit n-1: TPDO n)
         self._sync_outstanding = False
+        self._silent_syncs = 0              # SYNCs in a row the drive has not answered
+        self._last_cycle = now
+        self._last_answer = now             # when the drive last answered a SYNC (its TPDOs complete)
         self._next_master_heartbeat = now
         self._nmt_start_sent_at = -math.inf
         # start-up / shutdown sequence
@@ -179,6 +207,8 @@ class MotorDriver:
             self._event(WARN, f"rejected motor command: mode {mode}, setpoint {setpoint!r}", key="rejected")
             return False
         self.counters["commands_received"] += 1
+        if self._last_command is not None:
+            self.command_gaps.add(now - self._last_command)
         self._last_command = now
         self._mode = mode
         if mode == MODE_DISABLED:
@@ -195,11 +225,12 @@ class MotorDriver:
                 if self._ramp is None or self._ramp[:2] != (setpoint, duration):
                     # anchored at its stamp (the touchdown, or one predicted ahead: zero current until
                     # then), unless the command came late: a ramp skipped is energy lost
-                    self._ramp = (setpoint, duration, max(stamp, now - self.settings.max_ramp_age), stamp)
+                    self._ramp = (setpoint, duration, max(stamp, now - self.settings.max_ramp_age), stamp, 0.0)
                 elif abs(stamp - self._ramp[3]) > RAMP_RESTAMP:
                     # the same ramp under a new stamp (the measured touchdown after a predicted one):
-                    # the running ramp moves to it
-                    self._ramp = (setpoint, duration, stamp, stamp)
+                    # the running ramp moves to it, still held as long as it was (_hold_ramp)
+                    held = self._ramp[4]
+                    self._ramp = (setpoint, duration, stamp + held, stamp, held)
                 self._current_ma = self._current_setting(self._ramp_torque(now))
             else:
                 self._position_qc = self._position_setting(setpoint)
@@ -235,6 +266,11 @@ class MotorDriver:
         self._trip_watchdog(now)
         if self._sync_outstanding and self._tpdo_seen != (1 << len(TPDO_MAPPINGS)) - 1:
             self.counters["tpdo_missed"] += 1
+            self._silent_syncs += 1
+        else:
+            self._silent_syncs = 0
+        self._hold_ramp(now)
+        self._last_cycle = now
         self._send_rpdo(now, force=False)
         self._sent_since_sync = None
         self._tpdo_seen = 0
@@ -404,7 +440,7 @@ class MotorDriver:
         status.current = current_ma / 1000.0
         status.torque = self.units.torque(status.current)
         status.commanded_mode = self._mode if (self._want_enabled and state is State.OPERATION_ENABLED) else MODE_DISABLED
-        return self._tpdo_received(1)
+        return self._tpdo_received(1, now)
 
     def _on_tpdo2(self, data: bytes, now: float) -> bool:
         rpm, mode, error_code = TPDO_MAPPINGS[2].decode(data)
@@ -413,13 +449,14 @@ class MotorDriver:
         status.operation_mode = mode
         if error_code and error_code != status.fault_code:
             self._set_fault(error_code)
-        return self._tpdo_received(2)
+        return self._tpdo_received(2, now)
 
-    def _tpdo_received(self, number: int) -> bool:
+    def _tpdo_received(self, number: int, now: float) -> bool:
         self.counters["tpdo_received"] += 1
         self._tpdo_seen |= 1 << (number - 1)
         if self._sync_outstanding and self._tpdo_seen == (1 << len(TPDO_MAPPINGS)) - 1:
             self._sync_outstanding = False
+            self._last_answer = now
             return True
         return False
 
@@ -494,13 +531,15 @@ class MotorDriver:
         try:
             self.bus.send(frame, timeout=self.settings.sync_period)
         except (can.CanError, OSError) as exc:
-            self._bus_error(self.clock(), f"send of 0x{frame.arbitration_id:03X} failed: {exc}")
+            self.transport_lost = self.transport_lost or connection_closed(exc)
+            self._bus_error(self.clock(), f"send of 0x{frame.arbitration_id:03X} failed: {first_line(exc)}")
             return False
         self.counters["frames_sent"] += 1
         return True
 
-    def bus_error(self, text: str) -> None:
+    def bus_error(self, text: str, exc: BaseException | None = None) -> None:
         """Report a bus failure the caller saw (e.g. receiving failed): counted, drive disabled."""
+        self.transport_lost = self.transport_lost or (exc is not None and connection_closed(exc))
         self._bus_error(self.clock(), text)
 
     def _bus_error(self, now: float, text: str) -> None:
@@ -538,8 +577,21 @@ class MotorDriver:
                                "command disable to try again", key="reset_failed")
         return word
 
+    def _hold_ramp(self, now: float) -> None:
+        """A running ramp is the robot's: while the drive answers no SYNC (SILENT_SYNCS in a row: it,
+        or the simulated robot's process, is not running) the robot does not move on either, so the
+        ramp waits (its start moves with the clock) instead of running out in a stance that is frozen."""
+        if self._silent_syncs >= SILENT_SYNCS and self._ramp is not None and now > self._ramp[2]:
+            tau_0, duration, start, stamp, held = self._ramp
+            # the first silent period found: the robot stopped after the drive's last answer, so the
+            # ramp is held from then (the SILENT_SYNCS periods it took to tell are not lost torque)
+            since = max(self._last_answer, start) if self._silent_syncs == SILENT_SYNCS else self._last_cycle
+            pause = now - since
+            self._ramp = (tau_0, duration, start + pause, stamp, held + pause)
+            self.counters["ramp_held_syncs"] += 1
+
     def _ramp_torque(self, now: float) -> float:
-        tau_0, duration, start, _ = self._ramp
+        tau_0, duration, start = self._ramp[:3]
         return ramp_torque(float(now - start), float(tau_0), float(duration))   # (2.32)
 
     def _rpdo_frame(self, number: int, controlword: int) -> can.Message:

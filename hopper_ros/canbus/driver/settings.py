@@ -18,7 +18,7 @@ COUNTER_NAMES = (
     "frames_sent", "frames_received", "sync_sent", "tpdo_received", "tpdo_missed",
     "commands_received", "commands_rejected", "current_clamped", "malformed_frames",
     "sdo_aborts", "sdo_timeouts", "bus_errors", "emcy_received", "faults", "fault_resets",
-    "watchdog_stops", "heartbeat_losses", "drive_bootups", "startup_failures",
+    "watchdog_stops", "heartbeat_losses", "drive_bootups", "startup_failures", "ramp_held_syncs",
 )
 
 INFO, WARN, ERROR = 0, 1, 2   # event / health levels (DiagnosticStatus OK, WARN, ERROR)

@@ -1,0 +1,160 @@
+"""The demo under load (issue 29): does the robot fall, how well does it track, how does the loop fare.
+
+15 runs of `hopper demo --strides 30`, each beside one job (bench/_load.py, one session) of 3 busy
+processes per core, a second real-time process (SCHED_FIFO 50, the demo loop's priority: busy for up
+to 8 ms every 25 ms), fsync'd writes of 16 MiB and stalls of the simulated robot's process (SIGSTOP
+for 60-150 ms every 2-4 s):
+- 10 with launch/demo.launch.yaml, the loop on SCHED_FIFO as `make demo` runs it (`*_fifo`);
+- 5 with launch/demo_500hz.launch.yaml, every node with normal scheduling (`*_normal`): the machine
+  that does not permit SCHED_FIFO, so the load's real-time process runs without it too.
+(--quick: 2 and 1.) Each on a ROS domain of its own. Per run, from the demo's strides.csv and
+health.json (the nodes' diagnostics from the throw on, hopper_ros/cli/demo.py): a fall, the largest
+|apex error| past each setpoint's first stride, the states that reached the event detector more
+than 1 ms after their sample, the stance ramps the controller cancelled, the stances in which the
+leg felt no ramp torque or felt it more than 5 ms after the touchdown (hopper_ros/sim/stance.py),
+the motor command stream's gaps at the driver (p99 over the run, the longest), its watchdog
+stops. The runs' folders (launch.log of every node, strides, health) stay in
+bench/out/demo_load/; runs.jsonl has one line per run.
+"""
+import csv
+import json
+import math
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from _common import REPO, child_env  # noqa: E402 (bench/ is on sys.path)
+from _load import Load, LoadProfile  # noqa: E402
+
+sys.path.insert(0, str(REPO))
+from hopper_ros.environment import free_domain_id, realtime_scheduling_allowed  # noqa: E402
+
+OUT = REPO / "bench" / "out" / "demo_load"
+STRIDES = 30
+RUNS_FIFO, RUNS_NORMAL = 10, 5
+QUICK_RUNS_FIFO, QUICK_RUNS_NORMAL = 2, 1
+RUN_TIMEOUT = 240.0          # [s] one demo run, start to stop
+LOAD = dict(busy_per_core=3, io_chunk_mb=16, stall=(0.06, 0.15), stall_every=3.0)
+BURST = (0.008, 0.025)       # [s] the second real-time process: busy up to this long, this often
+
+
+def profile(fifo: bool) -> LoadProfile:
+    priority = 50 if fifo else 0
+    return LoadProfile("fifo" if fifo else "normal", realtime=(priority, *BURST), **LOAD)
+
+
+def apex_errors(rows) -> list[float]:
+    """|apex error| [cm] of each stride past the first one of each setpoint (a step's stride)."""
+    errors, previous = [], None
+    for index, row in enumerate(rows):
+        target = float(row["target_height_m"])
+        if index > 0 and target == previous:
+            errors.append(100.0 * abs(float(row["apex_height_m"]) - target))
+        previous = target
+    return errors
+
+
+def one_run(index: int, fifo: bool) -> dict:
+    folder = OUT / f"run_{index:02d}_{'fifo' if fifo else 'normal'}"
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    log = folder / "launch.log"
+
+    def sim_pid():
+        try:
+            match = re.findall(r"\[launch\] started sim_robot: pid (\d+)", log.read_text(errors="replace"))
+        except OSError:
+            return None
+        return int(match[-1]) if match else None
+
+    env = dict(child_env(), ROS_DOMAIN_ID=str(free_domain_id(index + 40)))
+    argv = [sys.executable, "-m", "hopper_ros.cli", "demo", "--strides", str(STRIDES), "-o", str(folder)]
+    if not fifo:
+        argv += ["--launch", "demo_500hz.launch.yaml"]
+    started = time.monotonic()
+    with Load(profile(fifo), stall_target=sim_pid, seed=index) as load, \
+            open(folder / "demo.out", "w", encoding="utf-8") as out:
+        try:
+            status = subprocess.run(argv, cwd=REPO, env=env, stdout=out, stderr=subprocess.STDOUT,
+                                    timeout=RUN_TIMEOUT).returncode
+        except subprocess.TimeoutExpired:
+            status = -1
+    with open(folder / "strides.csv", newline="", encoding="utf-8") as handle:
+        rows = list(csv.DictReader(handle))
+    health = json.loads((folder / "health.json").read_text()) if (folder / "health.json").exists() else {}
+    text = (folder / "demo.out").read_text(errors="replace")
+    errors = apex_errors(rows)
+    return {"run": index, "fifo": fifo, "status": status, "fell": "the robot fell" in text,
+            "strides": len(rows), "apex_err_max_cm": max(errors, default=math.nan),
+            "apex_err_mean_cm": sum(errors) / len(errors) if errors else math.nan,
+            "stalls": len(load.stalls), "seconds": time.monotonic() - started, **health}
+
+
+def figures(runs: list[dict], suffix: str) -> list[dict]:
+    def worst(key, pick=max):
+        values = [r[key] for r in runs if isinstance(r.get(key), (int, float)) and not math.isnan(r[key])]
+        return pick(values) if values else math.nan
+
+    def total(key):
+        return sum(r.get(key, 0) for r in runs if isinstance(r.get(key), (int, float)) and not math.isnan(r[key]))
+
+    failed = [r for r in runs if r["fell"] or r["status"] != 0 or r["strides"] < STRIDES]
+    clean = [r for r in runs if r not in failed]
+    return [
+        {"name": f"demo_fall_rate_under_load{suffix}_pct", "value": 100.0 * sum(r["fell"] for r in runs) / len(runs),
+         "unit": "%"},
+        {"name": f"demo_runs_failed_under_load{suffix}", "value": len(failed), "unit": "runs"},
+        {"name": f"demo_apex_err_max_cm_under_load{suffix}",
+         "value": max((r["apex_err_max_cm"] for r in clean), default=math.nan), "unit": "cm"},
+        {"name": f"demo_apex_err_mean_cm_under_load{suffix}",
+         "value": sum(r["apex_err_mean_cm"] for r in clean) / len(clean) if clean else math.nan, "unit": "cm"},
+        {"name": f"demo_late_samples_pct_under_load{suffix}", "value": worst("late_samples_pct"), "unit": "% (worst run)"},
+        {"name": f"demo_ramps_cancelled_under_load{suffix}", "value": total("ramps_cancelled"), "unit": "ramps"},
+        {"name": f"demo_stances_without_ramp_under_load{suffix}", "value": total("stances_without_torque"),
+         "unit": f"of {total('stances')} stances"},
+        {"name": f"demo_stances_ramp_late_under_load{suffix}", "value": total("stances_torque_late"),
+         "unit": "stances (onset > 5 ms)"},
+        {"name": f"demo_torque_onset_max_ms_under_load{suffix}", "value": worst("torque_onset_max_ms"), "unit": "ms"},
+        {"name": f"demo_command_gap_p99_ms_under_load{suffix}", "value": worst("command_gap_p99_ms"), "unit": "ms (worst run)"},
+        {"name": f"demo_command_gap_max_ms_under_load{suffix}", "value": worst("command_gap_max_ms"), "unit": "ms"},
+        {"name": f"demo_watchdog_stops_under_load{suffix}", "value": total("watchdog_stops"), "unit": "stops"},
+        {"name": f"demo_sim_freezes_under_load{suffix}", "value": total("sim_resyncs"), "unit": "freezes"},
+    ]
+
+
+def run(quick=False):
+    fifo_runs, normal_runs = (QUICK_RUNS_FIFO, QUICK_RUNS_NORMAL) if quick else (RUNS_FIFO, RUNS_NORMAL)
+    OUT.mkdir(parents=True, exist_ok=True)
+    allowed, why = realtime_scheduling_allowed()
+    if not allowed:
+        print(f"bench_demo_load: SCHED_FIFO not permitted ({why}): the FIFO runs use the 500 Hz graph too")
+    runs = []
+    with open(OUT / "runs.jsonl", "w", encoding="utf-8") as record:
+        for index in range(fifo_runs + normal_runs):
+            fifo = index < fifo_runs and allowed
+            result = one_run(index, fifo)
+            runs.append(result)
+            record.write(json.dumps(result) + "\n")
+            record.flush()
+            print(f"  run {index}: {'SCHED_FIFO 1 kHz' if fifo else 'normal 500 Hz'}, "
+                  f"{'FELL' if result['fell'] else str(result['strides']) + ' strides'}, max |apex error| "
+                  f"{result['apex_err_max_cm']:.2f} cm, late {result.get('late_samples_pct', math.nan):.1f} %, "
+                  f"gaps p99 {result.get('command_gap_p99_ms', math.nan):.1f} / max "
+                  f"{result.get('command_gap_max_ms', math.nan):.1f} ms, {result['stalls']} stalls", flush=True)
+    fifo_results = [r for r in runs if r["fifo"]]
+    normal_results = [r for r in runs if not r["fifo"]]
+    out = figures(runs, "")
+    if fifo_results:
+        out += figures(fifo_results, "_fifo")
+    if normal_results:
+        out += figures(normal_results, "_normal")
+    out.append({"name": "demo_load_runs", "value": len(runs), "unit": "runs"})
+    return out
+
+
+if __name__ == "__main__":
+    for figure in run(quick="--quick" in sys.argv):
+        print(figure)

@@ -1,0 +1,26 @@
+"""Issue 29: a node of the demo graph killed mid-run, on the real processes (launch/demo.launch.yaml
+under `hopper launch`, every node respawned). The estimator and the controller (one container in the
+demo): killed with SIGKILL, the command stream stops, the motor driver's watchdog disables the
+drive within 20 ms of the last command, nothing else ends, the container comes back and its
+controller enables the drive again. The robot stays held (the bench throws it and kills every
+node: bench/bench_demo_respawn.py)."""
+
+from __future__ import annotations
+
+import os
+
+from hopper_ros.environment import realtime_scheduling_allowed
+from hopper_ros.harness.live_graph import LiveGraph
+
+
+def test_killing_the_estimator_and_controller_container_disables_the_drive_and_it_comes_back(tmp_path):
+    arguments = () if realtime_scheduling_allowed()[0] else ("realtime_priority:=0", "robot_priority:=0",
+                                                             "driver_priority:=0")
+    with LiveGraph("demo.launch.yaml", tmp_path, arguments, env=dict(os.environ)) as graph:
+        assert graph.wait_up(), graph.log_lines(0)[-20:]
+        kill = graph.kill("sensing")
+        assert kill.respawned_at > kill.killed_at and kill.up_again_at > kill.respawned_at
+        assert kill.others_ended == []
+        assert 0.0 < kill.drive_off_ms <= 20.0, kill
+        assert graph.wait_up(30.0), "the drive was not enabled again"
+        assert graph.process.poll() is None

@@ -1,0 +1,172 @@
+"""Issue 29: the causes of the demo's falls under load, each in the in-process graph (fast, no ROS).
+
+hopper_ros.harness.graph_lockstep runs the modules of every node of the demo in one process, the
+host clock apart from the simulated robot's (`host_delay`): the loads of bench/bench_demo_load.py
+become the delays they cause. Each test failed before its fix (the robot fell, or its apex missed
+the setpoint by centimetres); the figures of the real graph under load are the bench's.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from hopper_ros.canbus.driver import load_motor_driver
+from hopper_ros.control.config import load_control
+from hopper_ros.control.stride_machine import Phase
+from hopper_ros.control.deadbeat import DeadbeatController
+from hopper_ros.hardware.config import load_hardware
+from hopper_ros.harness.graph_lockstep import GraphLockstep
+from hopper_ros.physics.params import load_params
+from hopper_ros.sim.config import load_sim_config
+
+HARDWARE = load_hardware()
+CONTROL = load_control()
+DRIVER = load_motor_driver().driver                # the demo's (launch/demo.launch.yaml: motor_driver.yaml)
+SETPOINT = (0.39, 2.0)
+STRIDES = 8
+
+
+def run_graph(host_delay=lambda t: 0.0, graph_hook=None):
+    """The demo's loop (control.yaml, motor_driver.yaml) for STRIDES strides at SETPOINT."""
+    graph = GraphLockstep(load_sim_config(), HARDWARE, DeadbeatController(load_params(), CONTROL.deadbeat),
+                          driver_settings=DRIVER, stride_settings=CONTROL.stride, host_delay=host_delay)
+    if graph_hook is not None:
+        graph_hook(graph)
+    try:
+        run = graph.run([SETPOINT] * STRIDES)
+    finally:
+        graph.close()
+    return graph, run
+
+
+def apex_errors(run) -> list[float]:
+    """|apex height - setpoint| [m] of each stride after the first."""
+    return [abs(apex[1] - SETPOINT[0]) for apex in run.true_apexes[2:STRIDES + 1]]
+
+
+def assert_hops_as_unloaded(graph, run):
+    assert not run.fell and len(run.true_apexes) > STRIDES
+    assert max(apex_errors(run)) < 0.005                        # the issue's 0.5 cm
+    stances = run.stances
+    assert stances.stances >= STRIDES and stances.without_torque == 0 and stances.late == 0, stances.onsets
+    assert graph.driver.counters["watchdog_stops"] == 0
+
+
+def test_unloaded_reference():
+    graph, run = run_graph()
+    assert_hops_as_unloaded(graph, run)
+    assert graph.sensing.estimator.clock.anchors == 1 and graph.policy.counters["touchdowns_missed"] == 0
+
+
+@pytest.mark.parametrize("skip_at", [1.0, 1.1, 1.2, 1.3])
+def test_the_simulated_robot_skipping_time_in_flight(skip_at):
+    """Cause 1: the simulated robot stalled beyond RESYNC_PERIODS skips the time it missed: from then on
+    every packet arrives 80 ms after its instant on the old clock mapping. The mapping, re-anchored
+    upwards only beyond 0.1 s and slewing 0.5 ms/s, left every stamp 80 ms old: every stance ramp
+    cancelled, the robot fell. Now re-anchored within clock_reanchor_after, the event detector
+    following the step of its stamps."""
+    graph, run = run_graph(lambda t: 0.08 if t >= skip_at else 0.0)
+    assert_hops_as_unloaded(graph, run)
+    assert graph.sensing.estimator.clock.anchors == 2 and graph.sensing.detector.counters["track_lost"] == 0
+
+
+def test_late_first_packets():
+    """Cause 2: the first packets arrive 40 ms late (a burst at start-up): the mapping anchored on them
+    put every stamp 40 ms ahead and the driver held each stance ramp 40 ms: the robot fell."""
+    graph, run = run_graph(lambda t: max(0.0, 0.04 - t))
+    assert_hops_as_unloaded(graph, run)
+    assert graph.sensing.estimator.clock.anchors == 2
+
+
+@pytest.mark.parametrize("into_stance,length", [(-0.005, 0.08), (0.0, 0.08), (0.005, 0.08), (0.02, 0.08),
+                                                 (0.04, 0.08), (0.01, 0.01)])
+def test_the_simulated_robot_frozen_in_a_stance(into_stance, length):
+    """Cause 3: the simulated robot's process stops in a stance (and then skips that time: its world was
+    frozen): the robot does not move, but the driver's ramp ran on on the host clock and was over
+    when the robot went on: that stance pushed with a fraction of tau_0 (the apex 2-3 cm low, the
+    robot fell when the next stride needed the torque limit). The driver now holds a running ramp
+    while the drive answers no SYNC. (Frozen at the touchdown itself, the touchdown is heard only
+    after the freeze: the controller cancels the ramp 20 ms past the predicted touchdown and starts
+    it again on the measured one.)"""
+    freeze = {"at": None, "touchdowns": 0, "contact": False, "pre": 0}
+
+    def hook(graph):
+        def host_delay(t):            # frozen from into_stance after the third touchdown on (before: at pre-touchdown)
+            contact = graph.robot.plant.in_contact
+            freeze["touchdowns"] += contact and not freeze["contact"]
+            freeze["contact"] = contact
+            if freeze["at"] is None and into_stance < 0 and freeze["touchdowns"] == 2 and not contact \
+                    and graph.policy.phase is Phase.PRE_TOUCHDOWN:
+                freeze["at"] = t                  # between the pre-touchdown event and the touchdown
+            if freeze["at"] is None and into_stance >= 0 and freeze["touchdowns"] == 3:
+                freeze["at"] = t + into_stance
+            return length if freeze["at"] is not None and t >= freeze["at"] else 0.0
+        graph.host_delay = host_delay
+
+    graph, run = run_graph(graph_hook=hook)
+    assert freeze["at"] is not None
+    assert_hops_as_unloaded(graph, run)
+    if into_stance > 0:
+        assert graph.driver.counters["ramp_held_syncs"] >= round(length / HARDWARE.microcontroller.sample_period) - 4
+
+
+def test_sensing_that_stops_while_hopping_disables_the_drive():
+    """The sensing chain dies (the estimator or the detector killed, each a process of its own in
+    demo_500hz.launch.yaml): the controller's repeats go on and would hold the leg or run a ramp
+    scheduled from the last events, whatever the robot does. No gait event for sensing_timeout while
+    hopping: the drive is disabled (no torque from a stale state); events again (the node respawned,
+    the robot thrown): hopping resumes."""
+    from hopper_ros.canbus.epos2_objects import State
+    from hopper_ros.harness.graph_lockstep import GraphRun
+    from hopper_ros.sensing.pipeline import PipelineOutput
+
+    dead_from, dead_to = 1.6, 3.0
+    graph = GraphLockstep(load_sim_config(), HARDWARE, DeadbeatController(load_params(), CONTROL.deadbeat),
+                          driver_settings=DRIVER, stride_settings=CONTROL.stride)
+    process = graph.sensing.process
+    graph.sensing.process = lambda datagram, received: (PipelineOutput(None) if dead_from <= graph.robot.t < dead_to
+                                                         else process(datagram, received))
+    run, enabled = GraphRun(), []
+    try:
+        graph.set_setpoint(*SETPOINT)
+        graph.robot.throw(*SETPOINT, graph.controller.neutral_angle(SETPOINT[1]), lead_time=0.05, hold=True)
+        while graph.robot.t < 0.5:
+            graph.step(run)
+        graph.robot.plant.release()
+        while graph.robot.t < dead_to + 0.3:
+            graph.step(run)
+            enabled.append((graph.robot.t, graph.robot.drive.state is State.OPERATION_ENABLED))
+        assert graph.policy.counters["sensing_lost"] == 1
+        lost = dead_from + CONTROL.stride.sensing_timeout
+        assert all(on for t, on in enabled if t < dead_from)
+        assert not any(on for t, on in enabled if lost + 0.01 <= t < dead_to), "the drive stayed enabled, blind"
+        # the chain back (respawned), the robot thrown again: the strides resume
+        hopped = len(run.true_apexes)
+        graph.robot.throw(*SETPOINT, graph.controller.neutral_angle(SETPOINT[1]), lead_time=0.05)
+        fell = run.fell
+        while len(run.true_apexes) < hopped + 6 and graph.robot.t < dead_to + 6.0:
+            graph.step(run)
+        assert not graph.policy.sensing_lost and len(run.true_apexes) >= hopped + 6
+        assert abs(run.true_apexes[-1][1] - SETPOINT[0]) < 0.005 and not graph.robot.plant.fallen, (fell, run.true_apexes[-3:])
+    finally:
+        graph.close()
+
+
+def test_a_drive_start_up_error_before_the_throw_does_not_keep_the_drive_off():
+    """Start-up ordering: the motor driver started before the simulated robot's hub answered, reported
+    ERROR once ("drive start-up failed: SDO timed out") and configured the drive 0.25 s later. The
+    controller had latched its safe state on that error: it commanded the drive disabled until an
+    apex, the robot was never thrown (the demo waits for an enabled drive), the graph never came up."""
+    from hopper_ros.control.stride_machine import MODE_POSITION
+    from hopper_ros.control.stride_policy import StridePolicy
+
+    from hopper_ros.control.stride_machine import MODE_DISABLED
+    from hopper_ros.control.stride_policy import FAULT_ACKNOWLEDGE
+
+    policy = StridePolicy(DeadbeatController(load_params(), CONTROL.deadbeat), CONTROL.stride)
+    policy.on_drive_fault("drive start-up failed: SDO 0x1017:00 timed out")
+    policy.on_setpoint(*SETPOINT)
+    # acknowledged (the driver resets a drive fault once the stream says MODE_DISABLED), then held
+    assert policy.command(0.0).mode == MODE_DISABLED and policy.command(FAULT_ACKNOWLEDGE / 2).mode == MODE_DISABLED
+    assert policy.command(FAULT_ACKNOWLEDGE + 1e-3).mode == MODE_POSITION
+    assert policy.counters["faults"] == 1 and policy.phase is Phase.INITIALISE
