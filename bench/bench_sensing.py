@@ -13,7 +13,7 @@ on the wall clock and notes the clocks just before each sendto, by sequence numb
 packet that revealed it by GaitEvent.state.sequence. The first second is warm-up, not measured.
 
 rclpy_two_hop_floor_p50_us / _p99_us: the same path with no work and no UDP (a 1 kHz publisher, a
-relay, an end noting publication time; 30 s, quick 10 s, same scheduling as the main run): what
+relay, an end noting publication time; 20 s, quick 10 s, same scheduling as the main run): what
 two hops of rclpy cost on this machine, the part of packet_to_event no node can remove.
 
 The main run puts every process on SCHED_FIFO (priority 50, as the demo's loop runs; normal
@@ -26,8 +26,8 @@ to the sink's callback: one more hop), deadline_miss_pct (the event detector's l
 its samples: states that reached it more than sensing.yaml's sample_deadline, 1 ms, after their
 sample's instant, i.e. the packet's earliest arrival; from its diagnostics, so that no 1 kHz
 listener loads the machine), events_measured,
-sensing_source_rate_hz. 60 s of packets (quick: 10 s). The same (30 s) with normal scheduling:
-*_normal_scheduling. And (30 s) with the nodes on
+sensing_source_rate_hz. 40 s of packets (quick: 10 s). The same (20 s) with normal scheduling:
+*_normal_scheduling. And (20 s) with the nodes on
 rclpy's SingleThreadedExecutor (HOPPER_EXECUTOR=single) instead of run_node's default events
 executor: packet_to_event_p50_us_single_executor, _p99_us_single_executor,
 deadline_miss_pct_single_executor.
@@ -36,11 +36,11 @@ Composed (issue 19): the three nodes in one component_container (hopper_ros/node
 what a launch file's node_container starts), the hand-over in-process (use_intra_process_comms:
 hopper_ros/nodes/intra_process.py; every message still on DDS for the sink): packet_to_event_p50_us_composed,
 _p99_us_composed (target < 1000 us), _max_us_composed, deadline_miss_pct_composed (target < 0.5 %),
-events_measured_composed, 60 s (quick 10 s) on SCHED_FIFO as the main run; the same 30 s with normal
-scheduling (*_composed_normal_scheduling); and composed with the hand-over through DDS (30 s, SCHED_FIFO:
+events_measured_composed, 40 s (quick 10 s) on SCHED_FIFO as the main run; the same 20 s with normal
+scheduling (*_composed_normal_scheduling); and composed with the hand-over through DDS (20 s, SCHED_FIFO:
 *_composed_dds), what one process saves without the in-process path.
 
-The hand-over alone (20 s, quick 5 s, SCHED_FIFO as the main run): two nodes composed in one process,
+The hand-over alone (15 s, quick 5 s, SCHED_FIFO as the main run): two nodes composed in one process,
 a thread publishing BodyMeasurement at 1 kHz as the bridge's receiving thread does, the other node's
 callback noting now - stamp: composed_handover_p50_us / _p99_us and the process's CPU per message
 composed_handover_cpu_us (in-process), the same through DDS inside the process (*_dds).
@@ -58,11 +58,11 @@ from _common import Paced, available_realtime_priority, child_env, percentile  #
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-DURATION_S = 60.0
+DURATION_S = 40.0
 QUICK_DURATION_S = 10.0
-VARIANT_DURATION_S = 30.0
-COST_DURATION_S = 30.0
-HANDOVER_S = 20.0
+VARIANT_DURATION_S = 20.0
+COST_DURATION_S = 20.0
+HANDOVER_S = 15.0
 HANDOVER_QUICK_S = 5.0
 QUICK_COST_DURATION_S = 6.0
 WARMUP_S = 1.0

@@ -127,6 +127,26 @@ def diagnose_and_score(name: str, recording, truth: dict, verbose: bool = True) 
     return s
 
 
+def score_folder(folder: Path, names, score, line, verbose: bool = True) -> list[dict]:
+    """Each recording of `folder` (CSV + truth JSON, `names` only if given) diagnosed and scored by
+    `score(result, truth)`; `line(row)` is printed per recording when verbose. The rows."""
+    from hopper_ros.diagnosis import diagnose_file
+
+    rows = []
+    for truth_path in sorted(folder.glob("*.json")):
+        if names and truth_path.stem not in names:
+            continue
+        truth = json.loads(truth_path.read_text())
+        result = diagnose_file(truth_path.with_suffix(".csv"))
+        row = score(result, truth)
+        row.update(name=truth_path.stem, seconds=result.wall_time, verdict=result.verdict,
+                   before=result.before.as_dict(), after=result.after.as_dict())
+        if verbose:
+            print(line(row), flush=True)
+        rows.append(row)
+    return rows
+
+
 def summarise(rows: list[dict]) -> dict:
     """Hit, false-positive and locate rates over scored rows; recordings whose held-out apex got worse."""
     from hopper_ros.physics import effects as library

@@ -80,24 +80,11 @@ def score(result, truth: dict) -> dict:
 
 
 def run(folder: Path, names=None, verbose: bool = True) -> dict:
-    from diagnosis_suite import summarise
+    from diagnosis_suite import score_folder, summarise
 
-    from hopper_ros.diagnosis import diagnose_file
-
-    rows = []
-    for truth_path in sorted(folder.glob("*.json")):
-        if names and truth_path.stem not in names:
-            continue
-        truth = json.loads(truth_path.read_text())
-        result = diagnose_file(truth_path.with_suffix(".csv"))
-        s = score(result, truth)
-        s.update(name=truth_path.stem, seconds=result.wall_time, verdict=result.verdict,
-                 before=result.before.as_dict(), after=result.after.as_dict())
-        if verbose:
-            print(f"{s['name']}: {len(s['hits'])}/{s['effects']} {s['hits']} missed {s['misses']} false "
-                  f"{s['false_positives']}, {s['seconds']:.0f} s | {s['verdict']}", flush=True)
-        rows.append(s)
-    return summarise(rows)
+    return summarise(score_folder(folder, names, score, lambda s: (
+        f"{s['name']}: {len(s['hits'])}/{s['effects']} {s['hits']} missed {s['misses']} false "
+        f"{s['false_positives']}, {s['seconds']:.0f} s | {s['verdict']}"), verbose))
 
 
 if __name__ == "__main__":

@@ -95,25 +95,15 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def run(folder: Path, names=None, verbose: bool = True) -> dict:
-    from hopper_ros.diagnosis import diagnose_file
+    from diagnosis_suite import score_folder
 
-    rows = []
-    for truth_path in sorted(folder.glob("*.json")):
-        if names and truth_path.stem not in names:
-            continue
-        truth = json.loads(truth_path.read_text())
-        result = diagnose_file(truth_path.with_suffix(".csv"))
-        s = score(result, truth)
-        s.update(name=truth_path.stem, seconds=result.wall_time, verdict=result.verdict,
-                 before=result.before.as_dict(), after=result.after.as_dict())
-        if verbose:
-            print(f"{s['name']}: mechanism {s['by_mechanism']} alike {s['alike']} missed {s['misses']} false "
-                  f"{s['false_verdicts']}, {s['seconds']:.0f} s | {s['verdict']}", flush=True)
-        rows.append(s)
-    return summarise(rows)
+    return summarise(score_folder(folder, names, score, lambda s: (
+        f"{s['name']}: mechanism {s['by_mechanism']} alike {s['alike']} missed {s['misses']} false "
+        f"{s['false_verdicts']}, {s['seconds']:.0f} s | {s['verdict']}"), verbose))
 
 
 if __name__ == "__main__":
+    sys.path.insert(0, str(REPO / "bench"))
     summary = run(Path(sys.argv[1]), sys.argv[2:] or None)
     print(json.dumps({k: v for k, v in summary.items() if k != "rows"}, indent=1))
     (Path(sys.argv[1]) / "score.json").write_text(json.dumps(summary, indent=1, default=str))
