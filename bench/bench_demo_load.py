@@ -7,7 +7,7 @@ for 60-150 ms every 2-4 s):
 - 10 with launch/demo.launch.yaml, the loop on SCHED_FIFO as `make demo` runs it (`*_fifo`);
 - 5 with launch/demo_500hz.launch.yaml, every node with normal scheduling (`*_normal`): the machine
   that does not permit SCHED_FIFO, so the load's real-time process runs without it too.
-(--quick: 2 and 1.) Each on a ROS domain of its own. Per run, from the demo's strides.csv and
+(--quick: 1 and 1.) Each on a ROS domain of its own. Per run, from the demo's strides.csv and
 health.json (the nodes' diagnostics from the throw on, hopper_ros/cli/demo.py): a fall, the largest
 |apex error| past each setpoint's first stride, the states that reached the event detector more
 than 1 ms after their sample, the stance ramps the controller cancelled, the stances in which the
@@ -35,7 +35,7 @@ from hopper_ros.environment import free_domain_id, realtime_scheduling_allowed  
 OUT = REPO / "bench" / "out" / "demo_load"
 STRIDES = 30
 RUNS_FIFO, RUNS_NORMAL = 10, 5
-QUICK_RUNS_FIFO, QUICK_RUNS_NORMAL = 2, 1
+QUICK_RUNS_FIFO, QUICK_RUNS_NORMAL = 1, 1
 RUN_TIMEOUT = 240.0          # [s] one demo run, start to stop
 LOAD = dict(busy_per_core=3, io_chunk_mb=16, stall=(0.06, 0.15), stall_every=3.0)
 BURST = (0.008, 0.025)       # [s] the second real-time process: busy up to this long, this often

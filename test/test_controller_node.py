@@ -40,27 +40,37 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
     node.create_subscription(MotorCommand, "motor_command", commands.append, best_effort)
     node.create_subscription(StrideCommand, "stride_command", strides.append, 10)
 
-    def tick() -> MotorCommand:
-        """The next command of the stream (sent on every change, repeated every keep_alive)."""
+    def key(command: MotorCommand) -> tuple:
+        """What a command asks for (a ramp's stamp is when it starts; a hold's is only when it was sent)."""
+        start = command.header.stamp.sec, command.header.stamp.nanosec
+        ramp = command.mode == MotorCommand.MODE_RAMP
+        return (command.mode, command.setpoint, command.duration) + (start if ramp else ())
+
+    def tick(after: MotorCommand | None = None) -> MotorCommand:
+        """The next command of the stream (sent on every change, repeated every keep_alive); with `after`,
+        the first one that differs from it (a repeat of the previous command still in flight is skipped)."""
         commands.clear()
-        assert spin_until(executor, lambda: commands, timeout=10.0)
-        return commands[-1]
+        fresh = lambda: [c for c in commands if after is None or key(c) != key(after)]  # noqa: E731
+        assert spin_until(executor, fresh, timeout=10.0)
+        return fresh()[0]
 
     try:
         assert spin_until(executor, lambda: apex.get_subscription_count()
                           and events.get_subscription_count() and setpoint.get_subscription_count()
                           and node.count_publishers("motor_command"))
-        assert tick().mode == MotorCommand.MODE_DISABLED              # nothing to do without a setpoint
+        idle = tick()
+        assert idle.mode == MotorCommand.MODE_DISABLED                # nothing to do without a setpoint
         setpoint.publish(ApexState(apex_height=0.39, forward_speed=2.0))
         spin_until(executor, lambda: False, timeout=0.3)
-        assert tick().mode == MotorCommand.MODE_POSITION             # leg held, ready for the throw
+        ready = tick(after=idle)
+        assert ready.mode == MotorCommand.MODE_POSITION             # leg held, ready for the throw
         apex.publish(ApexState(stride_index=3, apex_height=0.39, forward_speed=2.0))
         assert spin_until(executor, lambda: strides)
         decision = strides[-1]
         assert decision.feasible and decision.stride_index == 3 and decision.target_apex_height == 0.39
         assert 0.0 < decision.tau_0 < 12.5 and 0.2 < decision.touchdown_angle < 0.6
         assert decision.predicted_apex_height == pytest.approx(0.39, abs=2e-3)
-        flight = tick()
+        flight = tick(after=ready)
         assert (flight.mode, flight.setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(decision.touchdown_angle))
         # pre-touchdown: the ramp goes out now, stamped with the touchdown predicted from the event's state
         pre_touchdown = GaitEvent(type=GaitEvent.PRE_TOUCHDOWN)
@@ -70,7 +80,7 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         state.z, state.z_dot, state.leg_angle, state.leg_angle_rate = 0.205 * math.cos(0.4) + 0.02, -2.3, 0.4, 0.0
         events.publish(pre_touchdown)
         spin_until(executor, lambda: False, timeout=0.2)
-        ahead = tick()
+        ahead = tick(after=flight)
         params = load_params()
         expected = soon + touchdown_time(state.z, state.z_dot, 0.4, 0.0, params.rest_length, params.gravity,
                                           params.flight_damping_vertical)
@@ -81,7 +91,7 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         touchdown.header.stamp = stamp(soon + 0.01)
         events.publish(touchdown)
         spin_until(executor, lambda: False, timeout=0.2)
-        ramp = tick()                     # the driver runs the ramp, from the touchdown's stamp
+        ramp = tick(after=ahead)          # the driver runs the ramp, from the touchdown's stamp
         assert (ramp.mode, ramp.setpoint, ramp.duration) == (
             MotorCommand.MODE_RAMP, pytest.approx(decision.tau_0), pytest.approx(decision.predicted_liftoff_time))
         assert (ramp.header.stamp.sec, ramp.header.stamp.nanosec) == (touchdown.header.stamp.sec,
@@ -90,7 +100,8 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         liftoff.state.leg_angle = -0.31
         events.publish(liftoff)
         spin_until(executor, lambda: False, timeout=0.2)
-        assert (tick().mode, tick().setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(-0.31))
+        swing = tick(after=ramp)
+        assert (swing.mode, swing.setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(-0.31))
 
         apex.publish(ApexState(stride_index=4, apex_height=0.12, forward_speed=2.0))   # toe in the ground
         assert spin_until(executor, lambda: len(strides) == 2)
