@@ -168,6 +168,7 @@ def run_with_sim_robot(rclpy_session, hopper_cli, tmp_path, mode: str, duration:
         sim.wait_for_line(rf"{mode} at 1000 Hz")
         assert spin_until(listener.executor, lambda: sim.process.poll() is not None, timeout=SAFETY_TIMEOUT)
         assert sim.wait() == 0
+        listener.freezes = int(sim.wait_for_line(r"done, real-time factor [0-9.]+, (\d+) freezes").group(1))
 
         def all_reported():          # every packet through the bridge and the estimator (diagnostics)
             bridge, estimator = listener.diagnostics("/encoder_bridge"), listener.diagnostics("/state_estimator")
@@ -183,8 +184,10 @@ def run_with_sim_robot(rclpy_session, hopper_cli, tmp_path, mode: str, duration:
     return listener
 
 
-def compare_with_sim(got):
-    """Our events on the simulator's clock against its true events: (report, truth, stamps)."""
+def compare_with_sim(got, freezes: int = 0):
+    """Our events on the simulator's clock against its true events: (report, truth, stamps). `freezes`: how
+    often the simulated robot, further behind the wall clock than it catches up, froze its world (its clock
+    then steps against the host's, and so does the mapping of its stamps)."""
     # every clock onto the simulator's stamps: our stamp minus (ours - sim's) of the nearest sample
     truth_stamp = {m.sequence: seconds(m.header.stamp) for m in got["truth"]}
     our_stamp = {}
@@ -196,9 +199,12 @@ def compare_with_sim(got):
     assert len(offsets) > 0.5 * len(our_stamp)
     known = sorted(offsets)
     # our stamps keep the microcontroller's spacing (the flight fit relies on it) while following the
-    # host clock: from one sample to the next the mapping moves by tens of microseconds at most
+    # host clock: from one sample to the next the mapping moves by tens of microseconds at most, but where
+    # the robot's own clock stepped (a freeze: one step each; measured, 78-173 steps for 80-174 freezes)
     steps = np.abs(np.diff([offsets[s] for s in known])) / np.maximum(1, np.diff(known))
-    assert np.percentile(steps, 99) < 50e-6
+    jumps = int(np.sum(steps >= 50e-6))
+    print(f"\nstamp mapping: {jumps} steps of 50 us or more over {len(steps)} samples, the robot froze {freezes} times")
+    assert jumps <= freezes + 0.01 * len(steps), (jumps, freezes)
 
     def offset(sequence: int) -> float:
         index = min(bisect.bisect_left(known, sequence), len(known) - 1)
@@ -222,7 +228,7 @@ def test_nodes_find_every_event_of_the_simulated_robot_within_2_ms(rclpy_session
     listener = run_with_sim_robot(rclpy_session, hopper_cli, tmp_path, "realtime", 8.0,
                                   ("truth", "sim_events", "states", "events", "apex", "diagnostics"))
     got = listener.got
-    report, truth, truth_stamp, first_apex = compare_with_sim(got)
+    report, truth, truth_stamp, first_apex = compare_with_sim(got, listener.freezes)
     print(f"\n{len(truth.clean_spans)} clean strides: {report.summary()}")
     assert len(truth.clean_spans) >= 8
     assert not report.missed, report.missed

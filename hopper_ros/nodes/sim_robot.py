@@ -114,7 +114,7 @@ class SimRobotNode(Node):
     # ------------------------------------------------------------------ the stepping thread's callbacks
     def _done(self) -> None:
         self.get_logger().info(f"simulated {self.robot.t:.3f} s: done, real-time factor "
-                               f"{self.runner.realtime_factor():.2f}")
+                               f"{self.runner.realtime_factor():.2f}, {self.runner.counters['resyncs']} freezes")
         self.finished = True
 
     def _stamp(self, t: float, stamp=None):
