@@ -1,7 +1,7 @@
 """Issue 29: a node of the demo graph killed mid-run, on the real processes (launch/demo.launch.yaml
 under `hopper launch`, every node respawned). The estimator and the controller (one container in the
 demo): killed with SIGKILL, the command stream stops, the motor driver's watchdog disables the
-drive within 20 ms of the last command, nothing else ends, the container comes back and its
+drive (how soon: bench_demo_respawn), nothing else ends, the container comes back and its
 controller enables the drive again. The robot stays held (the bench throws it and kills every
 node: bench/bench_demo_respawn.py)."""
 
@@ -21,6 +21,10 @@ def test_killing_the_estimator_and_controller_container_disables_the_drive_and_i
         kill = graph.kill("sensing")
         assert kill.respawned_at > kill.killed_at and kill.up_again_at > kill.respawned_at
         assert kill.others_ended == []
-        assert 0.0 < kill.drive_off_ms <= 20.0, kill
+        # the drive goes off after the last command it had, by the driver's watchdog (the stream stopped);
+        # how soon (within 20 ms here) is bench_demo_respawn's respawn_sensing_drive_off_ms, not a timed test
+        assert kill.drive_off_ms > 0.0, kill
+        after = [line for t, line in graph.log_lines(kill.killed_at)]
+        assert any("no motor command for" in line and "then disable" in line for line in after), after[-20:]
         assert graph.wait_up(30.0), "the drive was not enabled again"
         assert graph.process.poll() is None
