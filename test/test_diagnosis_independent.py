@@ -228,9 +228,10 @@ def test_a_mismatch_no_force_shows_is_located_by_trajectory(suite):
     trajectory finds where they first leave it, in stance (what the tool says where no law it has fits). With
     the library's toe slip the strides return to the recording: named, mu within 20 % of the plant's."""
     from hopper_ros.diagnosis.core import base_variant
-    from hopper_ros.diagnosis.data import PHASES, prepare
-    from hopper_ros.diagnosis.locate import locate, trajectory_location
-    from hopper_ros.diagnosis.simulate import CHANNELS, simulate_variants
+    from hopper_ros.diagnosis.data import prepare
+    from hopper_ros.diagnosis.locate import locate
+    from hopper_ros.diagnosis.simulate import simulate_variants
+    from hopper_ros.diagnosis.yardstick import locate_by_trajectory
     from hopper_ros.physics.params import load_model
     from hopper_ros.recording.recordings import load_recording
 
@@ -241,8 +242,7 @@ def test_a_mismatch_no_force_shows_is_located_by_trajectory(suite):
     base = base_variant(params, effects)
     assert all(loc.ratio < settings.locate_threshold for loc in locate(data, base)[0])
     sim = simulate_variants(data, [base], keep_series=True)
-    first = trajectory_location(sim["by_phase"][0], sim["counts"], settings.locate_threshold,
-                                settings.trajectory_threshold, PHASES, CHANNELS)
+    first = locate_by_trajectory(data, base, sim["series"], settings)
     assert first is not None and first.basis == "trajectory" and first.site in ("stance_hip", "stance_along")
     assert "compression" in first.window, first.words()
     named = next(r for r in result.chosen if r.name == "toe_slip")

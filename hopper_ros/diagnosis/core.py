@@ -22,7 +22,7 @@ from hopper_ros.recording.recordings import Recording
 from . import acceptance
 from .candidates import candidate_sites
 from .data import PHASES, StrideData, prepare
-from .locate import Location, fit_locations, locate, trajectory_location
+from .locate import Location, fit_locations, locate
 from .lookalikes import discovered_look_alikes, fit_secondary
 from .progress import QUIET, Progress
 from .records import Diagnosis, Errors, Reference, Scored
@@ -30,7 +30,8 @@ from .report import verdict
 from .rounds import Log, restarts, rounds
 from .search import Search
 from .settings import Settings, load_settings  # noqa: F401  (the engine's settings, read here by callers)
-from .simulate import CHANNELS, Variant, simulate_variants
+from .simulate import Variant, simulate_variants
+from .yardstick import locate_by_trajectory
 
 
 def base_variant(params: ModelParams, model_effects: dict | None = None) -> Variant:
@@ -67,8 +68,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     after = search.held_out(chosen).errors if chosen else model.errors
     first_location = _with_chosen_sites(log.first_location, chosen, settings)
     if not chosen and all(loc.ratio < settings.locate_threshold for loc in first_location):
-        found = trajectory_location(base_sim["by_phase"][0], base_sim["counts"], settings.locate_threshold,
-                                    settings.trajectory_threshold, PHASES, CHANNELS)
+        found = locate_by_trajectory(data, base, base_sim["series"], settings)
         first_location = [found] + first_location if found else first_location
     residual_location = locate(data, current)[0] if chosen else first_location
     return Diagnosis(data, log.rounds, chosen, model.errors, after, _rms_table(final_sim, 0, data),

@@ -63,6 +63,7 @@ class ExtractionSettings:
         return cls(**{k: type(getattr(cls, k))(v) for k, v in (values or {}).items()})
 
 
+APEX_ERRORS = ("apex_height", "apex_time", "apex_y", "forward_speed")   # Strides.apex_errors' columns
 _STRIDE_FIELDS = ("apex_height", "forward_speed", "touchdown_angle", "tau_0", "ramp_duration",
                   "next_apex_height", "next_forward_speed", "stride_length", "stride_time",
                   "apex_time", "apex_y", "touchdown_time", "bottom_time", "liftoff_time", "next_apex_time",
@@ -96,6 +97,8 @@ class Strides:
     rejected: list = field(default_factory=list)    # (time [s], reason)
     phase: np.ndarray | None = None                 # phase label of every sample of the recording
     labelled: bool = False                          # phases from labels (True) or detected
+    # per stride, the standard errors of the opening apex's fits (APEX_ERRORS columns), from their own residuals
+    apex_errors: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.apex_height)
@@ -105,8 +108,9 @@ class Strides:
         return self.apex_height, self.forward_speed, self.touchdown_angle, self.tau_0, self.ramp_duration
 
     def subset(self, index) -> "Strides":
+        errors = None if self.apex_errors is None else self.apex_errors[index]
         return Strides(*(getattr(self, name)[index] for name in _STRIDE_FIELDS), rejected=[], phase=self.phase,
-                       labelled=self.labelled)
+                       labelled=self.labelled, apex_errors=errors)
 
     @classmethod
     def empty(cls) -> "Strides":
@@ -124,6 +128,17 @@ def _quadratic_vertex(t: np.ndarray, values: np.ndarray):
         return math.nan, math.nan, 0.0
     vertex = -b / (2.0 * a)
     return t0 + vertex, c - b * b / (4.0 * a), 2.0 * a
+
+
+def _quadratic_errors(t: np.ndarray, values: np.ndarray, orders) -> tuple[float, ...]:
+    """Standard errors of the coefficients of t^order (for each of `orders`) of the least-squares quadratic
+    through (t, values), the noise level taken from its own residual."""
+    basis = np.vander(t, 3, increasing=True)
+    coefficients, *_ = np.linalg.lstsq(basis, values, rcond=None)
+    residual = values - basis @ coefficients
+    variance = float(residual @ residual) / max(len(t) - 3, 1)
+    inverse = np.linalg.pinv(basis.T @ basis)
+    return tuple(math.sqrt(max(variance * inverse[k, k], 0.0)) for k in orders)
 
 
 def _crossing(t: np.ndarray, values: np.ndarray, index: int) -> float:
@@ -163,9 +178,11 @@ def extract_strides(recording: Recording, rest_length: float, settings: Extracti
     labelled = recording.phase is not None and np.any(recording.phase != UNLABELLED)
     phase_out = np.full(len(recording), UNLABELLED, dtype=int)
     rows: list[tuple] = []
+    errors: list[tuple] = []
     rejected: list[tuple[float, str]] = []
     for segment in recording.segments():
-        _segment_strides(recording, segment, rest_length, settings, period, labelled, phase_out, rows, rejected)
+        _segment_strides(recording, segment, rest_length, settings, period, labelled, phase_out, rows, errors,
+                         rejected)
     if not rows:
         out = Strides.empty()
     else:
@@ -173,11 +190,12 @@ def extract_strides(recording: Recording, rest_length: float, settings: Extracti
         out = Strides(*(np.asarray(c, dtype=float) for c in columns[:-2]),
                       np.asarray(columns[-2], dtype=int), np.asarray(columns[-1], dtype=int))
     out.rejected, out.phase, out.labelled = rejected, phase_out, bool(labelled)
+    out.apex_errors = np.asarray(errors, dtype=float).reshape(len(rows), len(APEX_ERRORS))
     return out
 
 
 def _segment_strides(rec: Recording, segment: slice, rho_0: float, s: ExtractionSettings, period: float,
-                     labelled: bool, phase_out: np.ndarray, rows: list, rejected: list) -> None:
+                     labelled: bool, phase_out: np.ndarray, rows: list, errors: list, rejected: list) -> None:
     t, y, z, theta, tau = (getattr(rec, n)[segment] for n in ("t", "y", "z", "theta", "tau"))
     offset = segment.start
     min_samples = max(2, int(round(s.min_phase / period)))
@@ -247,6 +265,7 @@ def _segment_strides(rec: Recording, segment: slice, rho_0: float, s: Extraction
         stop = offset + int(np.searchsorted(t, closing[0], side="right"))
         rows.append((opening[1], opening[3], touchdown_angle, tau_0, ramp, closing[1], closing[3], closing[2] - opening[2],
                      closing[0] - opening[0], opening[0], opening[2], td, bottoms[k], lo, closing[0], start, stop))
+        errors.append(opening[4])
 
 
 def _event_time(rec: Recording, kind: int, before: float, after: float) -> float:
@@ -258,7 +277,8 @@ def _event_time(rec: Recording, kind: int, before: float, after: float) -> float
 
 
 def _apex(t, y, z, a: int, b: int, s: ExtractionSettings, period: float):
-    """(time, height, y, forward speed) of the apex of flight [a, b), or None."""
+    """(time, height, y, forward speed, their standard errors in APEX_ERRORS order) of the apex of flight
+    [a, b), or None."""
     guard = int(math.ceil(s.edge_guard / period))
     lo = a + (guard if a > 0 else 0)
     hi = b - (guard if b < len(t) else 0)
@@ -271,6 +291,7 @@ def _apex(t, y, z, a: int, b: int, s: ExtractionSettings, period: float):
         return None
     tt = t[window]
     vertex, height, curvature = _quadratic_vertex(tt, z[window])
+    z_errors = _quadratic_errors(tt - vertex, z[window], (0, 1))
     if not (curvature < 0.0 and tt[0] - 2 * period <= vertex <= tt[-1] + 2 * period):
         return None
     if (vertex < tt[0] + 0.2 * (tt[-1] - tt[0]) and window.start == lo and lo > 0) or \
@@ -279,7 +300,10 @@ def _apex(t, y, z, a: int, b: int, s: ExtractionSettings, period: float):
     wide = int(round(s.speed_window / period))
     window = slice(max(lo, top - wide), min(hi, top + wide + 1))
     cy = np.polyfit(t[window] - vertex, y[window], 2)
-    return float(vertex), float(height), float(cy[2]), float(cy[1])
+    y_errors = _quadratic_errors(t[window] - vertex, y[window], (0, 1))
+    # the vertex time's error: the slope's at the vertex over the curvature (the height's is first order zero)
+    errors = (z_errors[0], z_errors[1] / max(abs(curvature), 1e-9), y_errors[0], y_errors[1])
+    return float(vertex), float(height), float(cy[2]), float(cy[1]), errors
 
 
 def _command_for(rec: Recording, flight_start: float, touchdown: float):
