@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -23,36 +24,97 @@ from hopper_ros.identification.strides import APEX_ERRORS, ExtractionSettings
 
 from .data import PHASES, StrideData
 from .locate import Location, trajectory_location
+from .records import Errors
 from .simulate import CHANNELS, Variant, simulate_variants
 
 
-def start_errors(data: StrideData) -> dict[str, np.ndarray]:
-    """Per stride, the standard error of each start value of a re-simulation (`Strides` field -> array)."""
+def start_errors(data: StrideData) -> dict[str, tuple[np.ndarray, dict]]:
+    """Per start value of a re-simulation: its standard error per stride and the `Strides` fields it moves by it
+    (name -> (error, field -> moved values))."""
     s = data.strides
-    errors = {}
+    out = {}
     if s.apex_errors is not None and len(s.apex_errors) == len(s):
-        errors = {name: s.apex_errors[:, k] for k, name in enumerate(APEX_ERRORS)}
+        for k, name in enumerate(APEX_ERRORS):
+            out[name] = (s.apex_errors[:, k], {name: getattr(s, name) + s.apex_errors[:, k]})
     # the held touchdown angle: the median of a still leg's samples, within one quantum of the truth
     q, sigma = data.quantum["theta"], data.sigma["theta"]
     extra = max(sigma * sigma - q * q / 12.0, 0.0)
-    held = math.sqrt(q * q / 12.0 + extra / ExtractionSettings().touchdown_samples)
-    errors["touchdown_angle"] = np.full(len(s), held)
-    return errors
+    held = np.full(len(s), math.sqrt(q * q / 12.0 + extra / ExtractionSettings().touchdown_samples))
+    out["touchdown_angle"] = (held, {"touchdown_angle": s.touchdown_angle + held})
+    if not data.rec.commands:
+        # a ramp (2.32) read from the logged torque is timed from the detected touchdown, the toe's height
+        # crossing zero: late by delta, it is the same line with tau_0 (1 - delta/t_f) and t_f - delta
+        rest, gravity = data.params.rest_length, data.params.gravity
+        drop = np.maximum(s.apex_height - rest * np.cos(s.touchdown_angle), 1e-3)
+        toe_noise = np.hypot(data.sigma["z"], rest * np.sin(s.touchdown_angle) * data.sigma["theta"])
+        late = toe_noise / np.sqrt(2.0 * gravity * drop)
+        timed = (s.tau_0 != 0) & (s.ramp_duration < ExtractionSettings().max_ramp_duration)
+        late = np.where(timed, np.minimum(late, 0.5 * s.ramp_duration), 0.0)
+        out["ramp_start"] = (late, {"tau_0": s.tau_0 * (1.0 - late / s.ramp_duration),
+                                    "ramp_duration": s.ramp_duration - late})
+    return out
 
 
-def trajectory_sd(data: StrideData, base: Variant, base_series: list[dict]) -> list[dict]:
+@dataclass
+class StartMove:
+    """The re-simulations with one start value moved by its standard error: per stride the change of the
+    residual series (channel -> samples) and of the predicted next apex (height, length, speed, time)."""
+
+    name: str
+    error: np.ndarray
+    series: list
+    pred: dict
+
+
+def start_moves(data: StrideData, base: Variant, base_sim: dict) -> list[StartMove]:
+    """Every start value of `start_errors` moved (`base_sim`: `simulate_variants(data, [base], keep_series=True)`)."""
+    moves = []
+    for name, (error, changes) in start_errors(data).items():
+        moved = dataclasses.replace(data.strides, **changes)
+        sim = simulate_variants(dataclasses.replace(data, strides=moved), [base], keep_series=True)
+        series = [{ch: _finite(r1[ch][0] - r0[ch][0]) for ch in CHANNELS}
+                  for r0, r1 in zip(base_sim["series"], sim["series"])]
+        pred = {k: _finite(sim["pred"][k][0] - base_sim["pred"][k][0]) for k in base_sim["pred"]}
+        moves.append(StartMove(name, error, series, pred))
+    return moves
+
+
+def _finite(x: np.ndarray) -> np.ndarray:
+    return np.nan_to_num(x, nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def trajectory_sd(data: StrideData, base_series: list[dict], moves: list[StartMove]) -> list[dict]:
     """Per stride and channel, the noise level of every sample of the re-simulation's residual against the
-    recording (`base_series`: `simulate_variants(..., keep_series=True)["series"]` of `base`)."""
+    recording: the sensor's and each moved start value's change, added in quadrature."""
     variance = [{ch: np.full(r[ch].shape[-1], data.sigma[ch] ** 2) for ch in CHANNELS} for r in base_series]
-    for name, error in start_errors(data).items():
-        moved = dataclasses.replace(data.strides)
-        setattr(moved, name, getattr(data.strides, name) + error)
-        series = simulate_variants(dataclasses.replace(data, strides=moved), [base], keep_series=True)["series"]
-        for i, (r0, r1) in enumerate(zip(base_series, series)):
+    for move in moves:
+        for i, change in enumerate(move.series):
             for ch in CHANNELS:
-                change = np.nan_to_num(r1[ch][0] - r0[ch][0], nan=0.0, posinf=0.0, neginf=0.0)
-                variance[i][ch] += change * change
+                variance[i][ch] = variance[i][ch] + change[ch] ** 2
     return [{ch: np.sqrt(v[ch]) for ch in CHANNELS} for v in variance]
+
+
+def noise_floor(data: StrideData, moves: list[StartMove], draws: int = 64, seed: int = 0) -> Errors:
+    """The held-out next-apex errors E_p, E_v, E_t of a model without any mismatch on this recording: each
+    prediction off by the moved start values' changes and each recorded next apex by its own fit's error (the
+    stride's opening apex's taken for its closing one), drawn as normal errors and averaged over `draws`."""
+    s = data.strides
+    variance = {"height": 0.0, "length": 0.0, "speed": 0.0, "time": 0.0}
+    for move in moves:
+        for key in variance:
+            variance[key] = variance[key] + move.pred[key] ** 2
+    errors = {name: (s.apex_errors[:, k] if s.apex_errors is not None else np.zeros(len(s)))
+              for k, name in enumerate(APEX_ERRORS)}
+    variance["height"] = variance["height"] + errors["apex_height"] ** 2
+    variance["length"] = variance["length"] + 2 * errors["apex_y"] ** 2
+    variance["speed"] = variance["speed"] + errors["forward_speed"] ** 2
+    variance["time"] = variance["time"] + 2 * errors["apex_time"] ** 2
+    recorded = {"height": s.next_apex_height, "length": s.stride_length, "speed": s.next_forward_speed,
+                "time": s.stride_time}
+    rng = np.random.default_rng(seed)
+    drawn = [Errors.of(data, {k: recorded[k] + rng.normal(0.0, 1.0, len(s)) * np.sqrt(variance[k])
+                              for k in recorded}) for _ in range(draws)]
+    return Errors(*(float(np.mean([getattr(e, k) for e in drawn])) for k in ("E_p", "E_v", "E_t")), 0)
 
 
 def trajectory_by_phase(data: StrideData, base_series: list[dict], sd: list[dict]) -> tuple[np.ndarray, np.ndarray]:
@@ -74,9 +136,9 @@ def trajectory_by_phase(data: StrideData, base_series: list[dict], sd: list[dict
     return by_phase, counts
 
 
-def locate_by_trajectory(data: StrideData, base: Variant, base_series: list[dict], settings) -> Location | None:
+def locate_by_trajectory(data: StrideData, base_series: list[dict], moves: list[StartMove], settings) -> Location | None:
     """Where the model's re-simulated strides first leave the recording by more than `settings`'
     trajectory_threshold noise levels (`locate.trajectory_location`), the noise levels these (`trajectory_sd`)."""
-    by_phase, counts = trajectory_by_phase(data, base_series, trajectory_sd(data, base, base_series))
+    by_phase, counts = trajectory_by_phase(data, base_series, trajectory_sd(data, base_series, moves))
     return trajectory_location(by_phase, counts, settings.locate_threshold, settings.trajectory_threshold, PHASES,
                                CHANNELS)
