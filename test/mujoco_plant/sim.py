@@ -139,6 +139,7 @@ class Hopper:
                 self.phase = "flight"
                 self.tau_cmd = 0.0
                 info["t_stance"] = lo - td
+                info["z_lo"], info["vy_lo"], info["vz_lo"] = z, vy, vz
                 nxt = controller.at_liftoff(z, vy, vz)
                 th, thd = r.theta()
                 self.swing = (th, thd, nxt.theta_td, nxt.t_swing, t)
@@ -159,11 +160,15 @@ class Hopper:
                 raise StrideFailure("no apex")
         info["z_apex"], info["v_apex"], info["y_apex"] = z, vy, y
         info["t_apex"] = self.t_off + t
+        info["apex_logged"] = self.n_step % self.steps_per_log == 0
         self.cmd = self.next_cmd
         return info
 
     def finish_run(self):
-        """Steps on (servo holding) to the first log instant at or after the apex."""
+        """Steps on (servo holding) to the first log instant at or after the apex (if the
+        apex was not itself on one)."""
+        if self.n_step % self.steps_per_log == 0:
+            return
         while self.n_step % self.steps_per_log != 0:
             self.robot.step(self._servo())
             self.n_step += 1

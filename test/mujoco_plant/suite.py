@@ -64,7 +64,8 @@ def effects(v: Variant) -> list[dict]:
         "soft_contact", "compliant, damped floor contact (MuJoCo soft constraint)",
         "touchdown, stance", a, "s",
         {"solref": list(v.contact_solref), "solimp": list(v.contact_solimp),
-         "friction": v.friction, "cone": "pyramidal", "condim": 3, "timestep": v.timestep},
+         "friction": v.friction, "cone": "pyramidal", "condim": 3, "timestep": v.timestep,
+         "integrator": v.integrator},
         f"The toe meets the floor through MuJoCo's soft contact: the constraint's reference "
         f"acceleration is a spring-damper of time constant {a * 1e3:g} ms and damping ratio "
         f"{b:g} mixed with the free motion by the impedance d = {d0:g}..{d1:g} (over "
@@ -192,7 +193,6 @@ def simulate(name: str, strides: int = STRIDES, seed: int | None = None,
         k, keep = 0, 1
         z_a, v_a = z0, v0
         while k < want:
-            n_before = len(hop.rows)
             try:
                 info = hop.stride(ctl)
             except StrideFailure as exc:
@@ -202,8 +202,8 @@ def simulate(name: str, strides: int = STRIDES, seed: int | None = None,
             info.update(run=throws, z_start=z_a, v_start=v_a)
             log.append(info)
             z_a, v_a = info["z_apex"], info["v_apex"]
-            keep = len(hop.rows) + 1   # the first sample at or after this apex comes next
-            del n_before
+            # the first sample at or after this apex: logged already, or the next one
+            keep = len(hop.rows) + (0 if info["apex_logged"] else 1)
             if not (ENVELOPE_Z[0] - 0.02 < z_a < ENVELOPE_Z[1] + 0.02
                     and ENVELOPE_V[0] - 0.2 < v_a < ENVELOPE_V[1] + 0.2):
                 break
