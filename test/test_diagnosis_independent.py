@@ -231,7 +231,7 @@ def test_a_mismatch_no_force_shows_is_located_by_trajectory(suite):
     from hopper_ros.diagnosis.data import prepare
     from hopper_ros.diagnosis.locate import locate
     from hopper_ros.diagnosis.simulate import simulate_variants
-    from hopper_ros.diagnosis.yardstick import locate_by_trajectory
+    from hopper_ros.diagnosis.yardstick import locate_by_trajectory, start_moves
     from hopper_ros.physics.params import load_model
     from hopper_ros.recording.recordings import load_recording
 
@@ -242,7 +242,7 @@ def test_a_mismatch_no_force_shows_is_located_by_trajectory(suite):
     base = base_variant(params, effects)
     assert all(loc.ratio < settings.locate_threshold for loc in locate(data, base)[0])
     sim = simulate_variants(data, [base], keep_series=True)
-    first = locate_by_trajectory(data, base, sim["series"], settings)
+    first = locate_by_trajectory(data, sim["series"], start_moves(data, base, sim), settings)
     assert first is not None and first.basis == "trajectory" and first.site in ("stance_hip", "stance_along")
     assert "compression" in first.window, first.words()
     named = next(r for r in result.chosen if r.name == "toe_slip")

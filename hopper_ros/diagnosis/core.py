@@ -25,13 +25,13 @@ from .data import PHASES, StrideData, prepare
 from .locate import Location, fit_locations, locate
 from .lookalikes import discovered_look_alikes, fit_secondary
 from .progress import QUIET, Progress
-from .records import Diagnosis, Errors, Reference, Scored
+from .records import Completeness, Diagnosis, Errors, Reference, Scored, completeness
 from .report import verdict
 from .rounds import Log, restarts, rounds
 from .search import Search
 from .settings import Settings, load_settings  # noqa: F401  (the engine's settings, read here by callers)
 from .simulate import Variant, simulate_variants
-from .yardstick import locate_by_trajectory
+from .yardstick import locate_by_trajectory, noise_floor, start_moves
 
 
 def base_variant(params: ModelParams, model_effects: dict | None = None) -> Variant:
@@ -45,6 +45,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     data = prepare(rec, params, settings.min_strides, settings.liftoff_window)
     base = base_variant(params, model_effects)
     base_sim = simulate_variants(data, [base], keep_series=True)
+    moves = start_moves(data, base, base_sim)
     data.corr_length = max(1.0, float(np.median([correlation_length(r["z"][0]) for r in base_sim["series"]])))
     data.model_sse = float(base_sim["sse"][0].sum())
     search = Search(data, base, settings, progress)
@@ -68,14 +69,15 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     after = search.held_out(chosen).errors if chosen else model.errors
     first_location = _with_chosen_sites(log.first_location, chosen, settings)
     if not chosen and all(loc.ratio < settings.locate_threshold for loc in first_location):
-        found = locate_by_trajectory(data, base, base_sim["series"], settings)
+        found = locate_by_trajectory(data, base_sim["series"], moves, settings)
         first_location = [found] + first_location if found else first_location
     residual_location = locate(data, current)[0] if chosen else first_location
+    left = completeness(model.errors, after, noise_floor(data, moves), residual_location, settings)
     return Diagnosis(data, log.rounds, chosen, model.errors, after, _rms_table(final_sim, 0, data),
                      _rms_table(final_sim, 1, data), base_sim["series"], final_sim["series"], first_location,
                      residual_location, log.discoveries,
-                     verdict(chosen, residual_location if chosen else first_location, settings.locate_threshold),
-                     settings, dict(model_effects or {}))
+                     verdict(chosen, residual_location if chosen else first_location, settings.locate_threshold, left),
+                     settings, dict(model_effects or {}), completeness=left)
 
 
 def correlation_length(resid: np.ndarray) -> float:

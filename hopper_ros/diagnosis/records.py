@@ -125,6 +125,7 @@ class Diagnosis:
     verdict: str
     settings: Settings
     model_effects: dict
+    completeness: "Completeness | None" = None   # what the accepted effects leave against the noise floor
     wall_time: float = 0.0
     report: object = None            # path of diagnosis.md when written
     json: object = None              # path of the JSON when written
@@ -137,3 +138,37 @@ class Reference:
 
     sse: np.ndarray
     errors: Errors
+
+
+@dataclass(frozen=True)
+class Completeness:
+    """What the accepted effects leave: the held-out next-apex errors against those of a model without any
+    mismatch on this recording (`yardstick.noise_floor`), the share of the model's excess over that floor left,
+    and the strongest located residual left."""
+
+    floor: Errors
+    over_floor: dict                 # E_p, E_v, E_t after the accepted effects over their floor
+    left_pct: float                  # share of the model's excess over the floor left [%]
+    explained: bool                  # every error within floor_factor x its floor and nothing located
+    site: str                        # where the residual left stands out ("" when nowhere)
+
+    def words(self) -> str:
+        ratios = "/".join(f"{self.over_floor[k]:.1f}" for k in APEX_ERRORS)
+        if self.explained:
+            return f"explained (held-out E_p/E_v/E_t at {ratios} x the noise floor)"
+        where = self.site or f"the next apex (E_p/E_v/E_t at {ratios} x the noise floor), not located"
+        return f"partly explained: {self.left_pct:.0f} % of the residual left, at {where}"
+
+    def as_dict(self) -> dict:
+        return {"explained": self.explained, "residual_left_pct": self.left_pct, "at": self.site,
+                "noise_floor": self.floor.as_dict(), "over_noise_floor": dict(self.over_floor)}
+
+
+def completeness(before: Errors, after: Errors, floor: Errors, left: list, settings: Settings) -> Completeness:
+    """How much of the mismatch the accepted effects explain (`left`: the located residual they leave)."""
+    over = {k: getattr(after, k) / max(getattr(floor, k), 1e-9) for k in APEX_ERRORS}
+    above = [loc for loc in left if loc.ratio >= settings.locate_threshold]
+    excess = max(before.total - floor.total, 1e-9)
+    share = 100.0 * min(max(after.total - floor.total, 0.0) / excess, 1.0) if math.isfinite(after.total) else 100.0
+    explained = all(r <= settings.floor_factor for r in over.values()) and not above
+    return Completeness(floor, over, share, explained, above[0].words() if above else "")

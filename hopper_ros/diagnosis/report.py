@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -33,8 +34,9 @@ def _finite(value):
     return value
 
 
-def verdict(chosen: list, left: list | None = None, threshold: float = math.inf) -> str:
-    """The `missing:` line; a located residual that nothing explains is named as such, not hidden."""
+def verdict(chosen: list, left: list | None = None, threshold: float = math.inf, complete=None) -> str:
+    """The `missing:` line; a located residual that nothing explains is named as such, not hidden; with
+    `complete` (`records.Completeness`) whether the accepted effects explain the mismatch or how much is left."""
     unexplained = [loc for loc in (left or []) if loc.ratio >= threshold]
     tail = ""
     if unexplained:
@@ -42,7 +44,11 @@ def verdict(chosen: list, left: list | None = None, threshold: float = math.inf)
                 + " (no library effect or discovered term fits it)")
     if not chosen:
         if not unexplained:
-            return "no significant mismatch"
+            if complete is None or complete.explained:
+                return "no significant mismatch"
+            ratios = "/".join(f"{complete.over_floor[k]:.1f}" for k in ("E_p", "E_v", "E_t"))
+            return (f"missing: something that moves the next apex (held-out E_p/E_v/E_t at {ratios} x the noise "
+                    "floor) and stands out nowhere in the strides")
         return ("missing: something no library effect or discovered term models, at "
                 + "; ".join(loc.words() for loc in unexplained[:2]))
     parts = []
@@ -56,6 +62,8 @@ def verdict(chosen: list, left: list | None = None, threshold: float = math.inf)
         if r.ties:
             text += " (or " + " or ".join(t.name for t in r.ties) + ": not separable on this data)"
         parts.append(text)
+    if complete is not None:   # says what `tail` says, with how much is left
+        tail = "; " + complete.words()
     return "missing: " + ", ".join(parts) + tail
 
 
@@ -125,10 +133,31 @@ def write_json(result, path: Path) -> Path:
            "location": _location_entries(result.location, threshold),
            "held_out": {"before": result.before.as_dict(), "after": result.after.as_dict()},
            "stance_begins_before_model_touchdown_s": result.data.touchdown_lead,
+           "completeness": result.completeness.as_dict() if result.completeness else None,
            "model_effects": result.model_effects}
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(_finite(doc), indent=2, allow_nan=False), encoding="utf-8")
     return path
+
+
+def _located_panel(ax, result) -> None:
+    """Per site, the located residual over the noise level before and after the accepted effects (the strongest
+    location of each site and basis), against the threshold."""
+    rows = {}
+    for column, locations in enumerate((result.location, result.residual_location)):
+        for loc in locations:
+            key = f"{loc.phase}, {loc.direction}" + ("" if loc.basis == "force" else f" ({loc.basis})")
+            rows.setdefault(key, [0.0, 0.0])[column] = max(rows.get(key, [0.0, 0.0])[column], loc.ratio)
+    names = sorted(rows, key=lambda k: -max(rows[k]))[:8]
+    x = np.arange(len(names))
+    ax.bar(x - 0.2, [rows[n][0] for n in names], 0.4, color="tab:red", label="model")
+    ax.bar(x + 0.2, [rows[n][1] for n in names], 0.4, color="tab:blue", label="model + accepted effects")
+    ax.axhline(result.settings.locate_threshold, color="black", lw=0.8, ls="--", label="threshold")
+    ax.set_xticks(x, [textwrap.fill(n, 16) for n in names], fontsize=7)
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_ylim(0.0, 2.0 * max([result.settings.locate_threshold] + [max(rows[n]) for n in names]))
+    ax.set_ylabel("located residual / noise level")
+    ax.legend(loc="upper right", fontsize=7)
 
 
 def write_report(result, out: Path) -> Path:
@@ -139,7 +168,10 @@ def write_report(result, out: Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     data = result.data
     s, rec = data.strides, data.rec
-    fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
+    fig = plt.figure(figsize=(9, 12))
+    grid = fig.add_gridspec(4, 1, height_ratios=(1, 1, 1, 0.9))
+    axes = [fig.add_subplot(grid[0])]
+    axes += [fig.add_subplot(grid[k], sharex=axes[0]) for k in (1, 2)]
     for i, (sb, sa) in enumerate(zip(result.base_series, result.after_series)):
         a, b = int(s.start[i]), int(s.stop[i])
         tk = rec.t[a:b] - s.touchdown_time[i]
@@ -153,8 +185,9 @@ def write_report(result, out: Path) -> Path:
         ax.axhspan(-3 * sig, 3 * sig, color="grey", alpha=0.3, label="+-3 noise std")
         ax.set_ylabel(f"{v} residual [{'mrad' if v == 'theta' else 'mm'}]")
     axes[0].legend(loc="upper left", fontsize=8)
-    axes[-1].set_xlabel("time from touchdown [ms]")
-    axes[0].set_title(f"{Path(rec.source).name}: {result.verdict}"[:110], fontsize=9)
+    axes[2].set_xlabel("time from touchdown [ms]")
+    _located_panel(fig.add_subplot(grid[3]), result)
+    fig.suptitle(textwrap.fill(f"{Path(rec.source).name}: {result.verdict}", 120), fontsize=8, ha="left", x=0.02)
     fig.tight_layout()
     png = out / "diagnosis.png"
     fig.savefig(png, dpi=110)
@@ -204,7 +237,12 @@ def write_report(result, out: Path) -> Path:
     lines += ["", "Held-out next-apex errors (magnitudes fitted without the stride's fold):", "",
               "| | E_p % | E_v % | E_t % |", "|---|---|---|---|",
               f"| model | {bf.E_p:.3f} | {bf.E_v:.3f} | {bf.E_t:.3f} |",
-              f"| model + accepted | {af.E_p:.3f} | {af.E_v:.3f} | {af.E_t:.3f} |", "",
+              f"| model + accepted | {af.E_p:.3f} | {af.E_v:.3f} | {af.E_t:.3f} |"]
+    if result.completeness is not None:
+        fl = result.completeness.floor
+        lines += [f"| noise floor (a model without mismatch on these strides) | {fl.E_p:.3f} | {fl.E_v:.3f} | "
+                  f"{fl.E_t:.3f} |", "", "Completeness: " + result.completeness.words() + "."]
+    lines += ["",
               "After the accepted effects: " + location_line(result.residual_location, threshold), "",
               "![residuals](diagnosis.png)", ""]
     md = out / "diagnosis.md"

@@ -34,6 +34,7 @@ class Settings:
     restarts: int = 3                # first-round runners-up that start the rounds again ...
     restart_threshold: float = 5.0   # ... when the accepted set leaves a residual this far over the noise level
     trajectory_threshold: float = 10.0   # nothing located by force: a re-simulated phase this many noise levels off
+    floor_factor: float = 2.0        # held-out next-apex errors within this many times their noise floor: explained
     secondary_grid: int = 5          # values of an accepted entry's secondary parameter tried (geometric)
 
 
