@@ -149,13 +149,15 @@ class Completeness:
     floor: Errors
     over_floor: dict                 # E_p, E_v, E_t after the accepted effects over their floor
     left_pct: float                  # share of the model's excess over the floor left [%]
-    explained: bool                  # every error within floor_factor x its floor and nothing located
+    explained: bool                  # nothing located, and every error within floor_factor x its floor or at
+    #                                  most explained_left_pct of the model's excess left
     site: str                        # where the residual left stands out ("" when nowhere)
 
     def words(self) -> str:
         ratios = "/".join(f"{self.over_floor[k]:.1f}" for k in APEX_ERRORS)
         if self.explained:
-            return f"explained (held-out E_p/E_v/E_t at {ratios} x the noise floor)"
+            return (f"explained (held-out E_p/E_v/E_t at {ratios} x the noise floor, {self.left_pct:.0f} % of the "
+                    "model's excess over it left)")
         where = self.site or f"the next apex (E_p/E_v/E_t at {ratios} x the noise floor), not located"
         return f"partly explained: {self.left_pct:.0f} % of the residual left, at {where}"
 
@@ -170,5 +172,6 @@ def completeness(before: Errors, after: Errors, floor: Errors, left: list, setti
     above = [loc for loc in left if loc.ratio >= settings.locate_threshold]
     excess = max(before.total - floor.total, 1e-9)
     share = 100.0 * min(max(after.total - floor.total, 0.0) / excess, 1.0) if math.isfinite(after.total) else 100.0
-    explained = all(r <= settings.floor_factor for r in over.values()) and not above
+    explained = not above and (all(r <= settings.floor_factor for r in over.values())
+                               or share <= settings.explained_left_pct)
     return Completeness(floor, over, share, explained, above[0].words() if above else "")
