@@ -22,6 +22,7 @@ from hopper_ros.recording.recordings import Recording
 from . import acceptance
 from .candidates import candidate_sites
 from .data import PHASES, StrideData, prepare
+from .drift import find_drift
 from .locate import Location, fit_locations, locate
 from .lookalikes import discovered_look_alikes, fit_secondary
 from .progress import QUIET, Progress
@@ -72,12 +73,15 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
         found = locate_by_trajectory(data, base_sim["series"], moves, settings)
         first_location = [found] + first_location if found else first_location
     residual_location = locate(data, current)[0] if chosen else first_location
+    drifts = find_drift(data, current, settings)[:1]
+    after = drifts[0].after if drifts else after     # the model with the drift
     left = completeness(model.errors, after, noise_floor(data, moves), residual_location, settings)
     return Diagnosis(data, log.rounds, chosen, model.errors, after, _rms_table(final_sim, 0, data),
                      _rms_table(final_sim, 1, data), base_sim["series"], final_sim["series"], first_location,
                      residual_location, log.discoveries,
-                     verdict(chosen, residual_location if chosen else first_location, settings.locate_threshold, left),
-                     settings, dict(model_effects or {}), completeness=left)
+                     verdict(chosen, residual_location if chosen else first_location, settings.locate_threshold, left,
+                             drifts),
+                     settings, dict(model_effects or {}), completeness=left, drifts=drifts)
 
 
 def correlation_length(resid: np.ndarray) -> float:

@@ -126,6 +126,7 @@ class Diagnosis:
     settings: Settings
     model_effects: dict
     completeness: "Completeness | None" = None   # what the accepted effects leave against the noise floor
+    drifts: list = field(default_factory=list)   # drift.Drift of a main parameter over the recording, modelled
     wall_time: float = 0.0
     report: object = None            # path of diagnosis.md when written
     json: object = None              # path of the JSON when written

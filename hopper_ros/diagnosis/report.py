@@ -34,15 +34,16 @@ def _finite(value):
     return value
 
 
-def verdict(chosen: list, left: list | None = None, threshold: float = math.inf, complete=None) -> str:
+def verdict(chosen: list, left: list | None = None, threshold: float = math.inf, complete=None, drifts=()) -> str:
     """The `missing:` line; a located residual that nothing explains is named as such, not hidden; with
-    `complete` (`records.Completeness`) whether the accepted effects explain the mismatch or how much is left."""
+    `complete` (`records.Completeness`) whether the accepted effects explain the mismatch or how much is left;
+    a drift of a main parameter (`drift.Drift`) said with its size and rate."""
     unexplained = [loc for loc in (left or []) if loc.ratio >= threshold]
     tail = ""
     if unexplained:
         tail = ("; unexplained: " + "; ".join(loc.words() for loc in unexplained[:2])
                 + " (no library effect or discovered term fits it)")
-    if not chosen:
+    if not chosen and not drifts:
         if not unexplained:
             if complete is None or complete.explained:
                 return "no significant mismatch"
@@ -62,6 +63,7 @@ def verdict(chosen: list, left: list | None = None, threshold: float = math.inf,
         if r.ties:
             text += " (or " + " or ".join(t.name for t in r.ties) + ": not separable on this data)"
         parts.append(text)
+    parts += [f"drift: {d.sentence()}" for d in drifts]
     if complete is not None:   # says what `tail` says, with how much is left
         tail = "; " + complete.words()
     return "missing: " + ", ".join(parts) + tail
@@ -134,6 +136,7 @@ def write_json(result, path: Path) -> Path:
            "held_out": {"before": result.before.as_dict(), "after": result.after.as_dict()},
            "stance_begins_before_model_touchdown_s": result.data.touchdown_lead,
            "completeness": result.completeness.as_dict() if result.completeness else None,
+           "drift": [d.as_dict() for d in result.drifts],
            "model_effects": result.model_effects}
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(_finite(doc), indent=2, allow_nan=False), encoding="utf-8")

@@ -34,16 +34,18 @@ FIELDS = laws.Coefficients.scalar_names() + laws.Coefficients.term_names()
 class Variant:
     coefficients: laws.Coefficients
     sensors: dict = field(default_factory=lambda: dict(SENSOR_OFF))
+    per_stride: dict = field(default_factory=dict)   # scalar coefficient -> its value per stride (a drift: `drift`)
 
     def with_changes(self, coefficients: dict | None = None, sensors: dict | None = None) -> "Variant":
         c = self.coefficients.replace(**coefficients) if coefficients else self.coefficients
-        return Variant(c, {**self.sensors, **(sensors or {})})
+        return Variant(c, {**self.sensors, **(sensors or {})}, dict(self.per_stride))
 
 
 def variant_key(variant: Variant) -> tuple:
     """What a variant's simulation depends on: every coefficient and sensor value."""
     c = variant.coefficients
-    return tuple(getattr(c, name) for name in FIELDS) + tuple(sorted(variant.sensors.items()))
+    return (tuple(getattr(c, name) for name in FIELDS) + tuple(sorted(variant.sensors.items()))
+            + tuple((name, np.asarray(values, float).tobytes()) for name, values in sorted(variant.per_stride.items())))
 
 
 def simulate_variants(data: StrideData, variants: list[Variant], keep_series: bool = False) -> dict:
@@ -88,6 +90,9 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
     s, rec = data.strides, data.rec
     ns, nv = len(s), len(variants)
     coef = lanes.stack([v.coefficients for v in variants], ns)
+    for k, variant in enumerate(variants):
+        for name, values in variant.per_stride.items():
+            getattr(coef, name)[k * ns:(k + 1) * ns] = values
     sens = {k: np.repeat(np.array([v.sensors.get(k, SENSOR_OFF[k]) for v in variants]), ns) for k in SENSOR_OFF}
     rings = {ch: {ringing.key(ch, p): np.array([v.sensors.get(ringing.key(ch, p), 0.0) for v in variants])[:, None]
                   for p in ringing.KEYS} for ch in CHANNEL_SITE}
