@@ -37,7 +37,7 @@ from mcap.records import Channel, Chunk, Metadata, Schema
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
-from hopper_ros.messages import message_class, split_type_name
+from hopper_ros.runtime.messages import message_class, split_type_name
 
 from .schemas import message_definition, type_hash
 
@@ -264,7 +264,7 @@ class BagWriter:
         """Serialize a message object (rclpy's CDR serializer) and append it; declares the topic."""
         name = topic if topic in self._channels else _topic_name(topic)
         if name not in self._channels:
-            from hopper_ros.messages import type_name_of
+            from hopper_ros.runtime.messages import type_name_of
 
             self.add_topic(name, type_name_of(message))
         serialize = self._serializers.get(type(message))

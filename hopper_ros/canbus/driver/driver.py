@@ -50,7 +50,7 @@ from hopper_ros.canbus.master import (
     nmt_state_name,
     sync_frame,
 )
-from hopper_ros.gaps import GapHistogram
+from hopper_ros.runtime.gaps import GapHistogram
 from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.physics.laws import ramp_torque
 
