@@ -38,7 +38,7 @@ import can
 
 from hopper_ros.canbus import epos2_objects as eo
 from hopper_ros.canbus.epos2_objects import Command, NmtCommand, NmtState, OperationMode, State
-from hopper_ros.canbus.master import (
+from hopper_ros.canbus.cia301.master import (
     HeartbeatConsumer,
     MalformedFrame,
     SdoClient,
