@@ -66,7 +66,7 @@ REALTIME_PRIORITY = 50      # SCHED_FIFO priority of the demo's loop (launch/dem
 
 def available_realtime_priority() -> int:
     """REALTIME_PRIORITY where this process may use SCHED_FIFO, else 0 (normal scheduling)."""
-    from hopper_ros.environment import realtime_scheduling_allowed
+    from hopper_ros.runtime.environment import realtime_scheduling_allowed
 
     return REALTIME_PRIORITY if realtime_scheduling_allowed()[0] else 0
 
@@ -75,7 +75,7 @@ def available_realtime_priority() -> int:
 def realtime(priority):
     """`with realtime(priority):` every thread of this process (and those started meanwhile) on SCHED_FIFO at
     `priority` (0: unchanged), as the demo's loop runs; normal scheduling again on leaving."""
-    from hopper_ros.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority
+    from hopper_ros.runtime.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority
 
     if priority:
         apply_realtime_priority({REALTIME_PRIORITY_VAR: str(priority)})

@@ -30,7 +30,7 @@ from _common import REPO, child_env  # noqa: E402 (bench/ is on sys.path)
 from _load import Load, LoadProfile  # noqa: E402
 
 sys.path.insert(0, str(REPO))
-from hopper_ros.environment import free_domain_id, realtime_scheduling_allowed  # noqa: E402
+from hopper_ros.runtime.environment import free_domain_id, realtime_scheduling_allowed  # noqa: E402
 
 OUT = REPO / "bench" / "out" / "demo_load"
 STRIDES = 30

@@ -27,7 +27,7 @@ from _common import REPO  # noqa: E402 (bench/ is on sys.path)
 sys.path.insert(0, str(REPO))
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
-from hopper_ros.environment import apply_ros_environment, free_domain_id  # noqa: E402
+from hopper_ros.runtime.environment import apply_ros_environment, free_domain_id  # noqa: E402
 
 ORDER = ("sensing", "setpoint_scheduler", "motor_driver", "sim_robot")
 STRIDES = 4

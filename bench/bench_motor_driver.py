@@ -117,7 +117,7 @@ def run(quick=False):
 # ---------------------------------------------------------------------------- publisher process
 
 def _publish(topic, total, rate_hz):
-    from hopper_ros.environment import apply_realtime_priority
+    from hopper_ros.runtime.environment import apply_realtime_priority
     from hopper_ros.hardware.config import load_hardware
     from hopper_ros.msg import MotorCommand
 

@@ -27,7 +27,7 @@ import yaml
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from hopper_ros.environment import free_domain_id  # noqa: E402
+from hopper_ros.runtime.environment import free_domain_id  # noqa: E402
 from hopper_ros.hardware.config import load_hardware  # noqa: E402
 from hopper_ros.harness.collect import CollectionSettings, collect  # noqa: E402
 from hopper_ros.msg import BodyMeasurement  # noqa: E402

@@ -495,7 +495,7 @@ if __name__ == "__main__":
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     role = sys.argv[1] if len(sys.argv) > 1 else "run"
     if role in ("source", "sink", "floor_source", "floor_relay", "floor_end", "handover"):
-        from hopper_ros.environment import apply_realtime_priority
+        from hopper_ros.runtime.environment import apply_realtime_priority
 
         apply_realtime_priority()            # HOPPER_REALTIME_PRIORITY of the run, as the nodes
     if role == "source":

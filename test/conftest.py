@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from hopper_ros.environment import free_domain_id, restore_default_stop_signals
+from hopper_ros.runtime.environment import free_domain_id, restore_default_stop_signals
 
 REPO = Path(__file__).resolve().parent.parent
 SAFETY_TIMEOUT = 60.0  # [s] bound on any wait in the tests: a hang fails instead of blocking CI
@@ -29,7 +29,7 @@ SAFETY_TIMEOUT = 60.0  # [s] bound on any wait in the tests: a hang fails instea
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ["ROS_DOMAIN_ID"] = str(free_domain_id())
-from hopper_ros.environment import apply_ros_environment  # noqa: E402 - after the range is set
+from hopper_ros.runtime.environment import apply_ros_environment  # noqa: E402 - after the range is set
 
 apply_ros_environment()   # LOCALHOST: the loopback profile (every DDS socket on 127.0.0.1), for children too
 os.environ.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")

@@ -151,7 +151,7 @@ def test_ament_index_finds_the_package_without_manual_environment():
     assert result.returncode == 0, result.stderr
     share, discovery, marker, profile = result.stdout.split()
     assert Path(share) == VENV / "share" / "hopper_ros"
-    # the loopback profile (hopper_ros.environment): rcl gets SYSTEM_DEFAULT, the profile keeps DDS on 127.0.0.1
+    # the loopback profile (hopper_ros.runtime.environment): rcl gets SYSTEM_DEFAULT, the profile keeps DDS on 127.0.0.1
     assert (discovery, marker) == ("SYSTEM_DEFAULT", "1")
     assert Path(profile).read_bytes() == (ROOT / "hopper_ros" / "dds" / "fastdds_loopback.xml").read_bytes()
 

@@ -20,7 +20,8 @@ import pytest
 
 from hopper_ros.canbus import epos2_objects as eo
 from hopper_ros.canbus.epos2_objects import State
-from hopper_ros.canbus.socketcand_server import SocketcandServer, format_frame, loopback_host, parse_send
+from hopper_ros.canbus.socketcand_protocol import format_frame, loopback_host, parse_send
+from hopper_ros.canbus.socketcand_server import SocketcandServer
 from test_canbus_epos2 import EDS, HARDWARE, NODE, DriveLoop
 
 DATA = Path(__file__).resolve().parent / "data"

@@ -26,7 +26,7 @@ def test_run_unknown_node_lists_the_known_ones(hopper_cli):
 def test_topic_echo_and_list_see_a_running_graph(rclpy_session, hopper_cli):
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-    from hopper_ros.messages import message_class, message_to_dict
+    from hopper_ros.runtime.messages import message_class, message_to_dict
     from test_messages import GAIT_EVENT_YAML
 
     rclpy = rclpy_session

@@ -17,7 +17,7 @@ from hopper_ros.config import load_yaml
 from hopper_ros.harness.sensing_evaluation import record_experiments
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.hardware.config import load_hardware
-from hopper_ros.launcher import LaunchFileError, load_launch, parse_launch
+from hopper_ros.launch import LaunchFileError, load_launch, parse_launch
 from hopper_ros.sim.config import load_sim_config
 from hopper_ros.sim.robot import SimRobot
 

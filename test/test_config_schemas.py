@@ -1,4 +1,4 @@
-"""One typed, validated schema per config file (issue 17): hopper_ros/schema.py, hopper_ros/config_schemas.py.
+"""One typed, validated schema per config file (issue 17): hopper_ros/config/schema.py, hopper_ros/config/schemas.py.
 
 A table of bad configuration files, each given to a node or tool as a user gives it: the process
 exits 1 and its stderr is one line naming the file, the key and what is wrong (the audit had 9 of
@@ -23,10 +23,10 @@ import yaml
 from conftest import REPO
 from hopper_ros.canbus.driver import NODE_KEYS, load_motor_driver
 from hopper_ros.config import load_yaml
-from hopper_ros.config_schemas import CONTROL, HARDWARE, IDENTIFICATION, MODEL, MOTOR_DRIVER, SCHEDULE, SENSING, SIM
+from hopper_ros.config.schemas import CONTROL, HARDWARE, IDENTIFICATION, MODEL, MOTOR_DRIVER, SCHEDULE, SENSING, SIM
 from hopper_ros.control.config import load_control
 from hopper_ros.hardware.config import load_hardware
-from hopper_ros.schema import ConfigError, Items, Number, Section, Text, load_config, validate
+from hopper_ros.config.schema import ConfigError, Items, Number, Section, Text, load_config, validate
 
 DELETE = object()
 
@@ -217,7 +217,7 @@ def test_a_model_file_with_library_effects_passes_its_schema(tmp_path):
     """An identified model with effects (`hopper identify --effects`): the nodes read its parameters."""
     import math
 
-    from hopper_ros.config_schemas import load_model
+    from hopper_ros.config.schemas import load_model
     from hopper_ros.physics.params import load_params, save_params
 
     path = save_params(load_params(), tmp_path / "identified.yaml",

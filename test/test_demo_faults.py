@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 
-from hopper_ros.environment import realtime_scheduling_allowed
+from hopper_ros.runtime.environment import realtime_scheduling_allowed
 from hopper_ros.harness.live_graph import LiveGraph
 
 

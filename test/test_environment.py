@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from hopper_ros.environment import (
+from hopper_ros.runtime.environment import (
     DISCOVERY_RANGE_VAR,
     LOOPBACK_PROFILE,
     LOOPBACK_VAR,
@@ -146,7 +146,7 @@ def _policies(pid: int) -> set[int]:
 
 @pytest.mark.parametrize("value", ["0", "100", "high"])
 def test_a_bad_realtime_priority_is_refused(value):
-    from hopper_ros.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority
+    from hopper_ros.runtime.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority
 
     env = {REALTIME_PRIORITY_VAR: value}
     if value == "0":
@@ -160,7 +160,7 @@ def test_a_node_asked_for_realtime_priority_runs_every_thread_on_sched_fifo(hopp
     import socket
 
     from conftest import free_port
-    from hopper_ros.environment import REALTIME_PRIORITY_VAR
+    from hopper_ros.runtime.environment import REALTIME_PRIORITY_VAR
 
     rt = hopper_cli("run", "encoder_bridge", "--ros-args", "-p", f"port:={free_port(socket.SOCK_DGRAM)}",
                     env={REALTIME_PRIORITY_VAR: "7"})

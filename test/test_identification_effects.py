@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hopper_ros.config_schemas import check_effects
+from hopper_ros.config.schemas import check_effects
 from hopper_ros.identification.crossval import cross_validate
 from hopper_ros.identification.lanesfit import cost_gradient, cost_of_residuals, with_effects
 from hopper_ros.identification.settings import load_settings

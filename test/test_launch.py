@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from hopper_ros.launcher import LaunchFileError, load_launch, parse_launch
+from hopper_ros.launch import LaunchFileError, load_launch, parse_launch
 from hopper_ros.nodes.registry import NODES
 
 STARTED_CHILD = r"^\[launch\] started {}: pid (\d+)$"
@@ -85,7 +85,7 @@ def test_node_attributes_become_ros_arguments(tmp_path):
 
 
 def test_realtime_priority_is_the_node_environment_of_that_node_only():
-    from hopper_ros.environment import REALTIME_PRIORITY_VAR
+    from hopper_ros.runtime.environment import REALTIME_PRIORITY_VAR
 
     rt, normal = parse_launch({"launch": [node("encoder_bridge", env=[{"name": REALTIME_PRIORITY_VAR, "value": "60"}]),
                                           node("setpoint_scheduler")]}, "t.yaml").children
@@ -186,7 +186,7 @@ def test_show_args_and_print(hopper_cli):
 _SUPERVISE = textwrap.dedent(
     """
     import sys
-    from hopper_ros.launcher import ChildSpec, Launcher
+    from hopper_ros.launch import ChildSpec, Launcher
     # 'stubborn' ignores SIGINT (so does its grandchild, a sleep): only SIGTERM stops them.
     stubborn = "trap '' INT; sleep 120 & echo grandchild $!; wait"
     polite = "echo ready; exec sleep 120"
@@ -208,7 +208,7 @@ def test_respawn_and_its_delay_are_read_as_launch_ros_does():
 _RESPAWN = textwrap.dedent(
     """
     import sys
-    from hopper_ros.launcher import ChildSpec, Launcher
+    from hopper_ros.launch import ChildSpec, Launcher
     # both end cleanly (exit 0) on the launcher's SIGINT, as nodes do
     node = "import signal, sys, time; signal.signal(signal.SIGINT, lambda *a: sys.exit(0)); print({!r}, flush=True); time.sleep(120)"
     children = [ChildSpec("flaky", [sys.executable, "-c", node.format("up")], respawn=True, respawn_delay=0.3),
@@ -369,7 +369,7 @@ def test_nodes_of_a_killed_launcher_stop_too():
 
     script = textwrap.dedent(
         """
-        from hopper_ros.launcher import ChildSpec, Launcher
+        from hopper_ros.launch import ChildSpec, Launcher
         Launcher([ChildSpec("orphan", ["sh", "-c", "echo ready; exec sleep 120"])]).run()
         """
     )

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from hopper_ros.messages import message_class, message_to_dict, message_to_yaml, type_name_of
+from hopper_ros.runtime.messages import message_class, message_to_dict, message_to_yaml, type_name_of
 
 REPO = Path(__file__).resolve().parent.parent
 MESSAGE_NAMES = sorted(path.stem for path in (REPO / "msg").glob("*.msg"))

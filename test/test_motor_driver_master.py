@@ -1,4 +1,4 @@
-"""Our CANopen master primitives (hopper_ros.canbus.master) against the independent `canopen`
+"""Our CANopen master primitives (hopper_ros.canbus.cia301.master) against the independent `canopen`
 library: a canopen LocalNode with the EPOS2's object dictionary on a python-can `virtual` bus is
 the SDO server, NMT slave, heartbeat and EMCY producer and the PDO decoder."""
 
@@ -14,7 +14,7 @@ import pytest
 from canopen import objectdictionary as cod
 
 from hopper_ros.canbus import epos2_objects as eo
-from hopper_ros.canbus.master import (
+from hopper_ros.canbus.cia301.master import (
     HeartbeatConsumer,
     MalformedFrame,
     PdoEntry,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from hopper_ros.setpoints import ScheduleError, ScheduleRunner, load_schedule, parse_schedule
+from hopper_ros.control.setpoints import ScheduleError, ScheduleRunner, load_schedule, parse_schedule
 
 
 def schedule(*segments, **top):

@@ -8,7 +8,7 @@ from conftest import SAFETY_TIMEOUT, spin_until
 from hopper_ros.physics.exact import simulate_stride
 from hopper_ros.physics.params import ModelParams
 from hopper_ros.physics.predictors import predict_stride
-from hopper_ros.stride_monitor import Apex, Command, StrideMonitor
+from hopper_ros.control.stride_monitor import Apex, Command, StrideMonitor
 
 PARAMS = ModelParams()
 H, V, THETA, TAU = 0.35, 2.0, math.radians(20.0), 5.0

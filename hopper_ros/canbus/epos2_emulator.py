@@ -13,20 +13,26 @@ Single-threaded: the owner calls `poll(now)` (handle received frames) and `contr
 (the 1 kHz drive cycle) from one thread; `now` is the owner's clock (simulation time) [s].
 Malformed input never raises: it is counted in `malformed_frames` and answered like a CiA 301
 device (SDO abort, EMCY 0x8210 for an RPDO of the wrong length). Details: docs/canopen.md.
+
+The SDO server and the PDO engine are the generic CiA 301 pieces of hopper_ros/canbus/cia301/
+(`sdo_server`, `pdo`); this module holds the EPOS2: its dictionary's values and rules, NMT, heartbeat,
+EMCY and the error history, CiA 402 device control and the modes' regulation.
 """
 
 from __future__ import annotations
 
 import logging
 import struct
-from dataclasses import dataclass, field
 
 import can
 
 from hopper_ros.canbus import epos2_objects as od
+from hopper_ros.canbus.cia301.counters import Counters
+from hopper_ros.canbus.cia301.pdo import PdoEngine
+from hopper_ros.canbus.cia301.sdo_server import MAX_SEGMENTED_SIZE, SdoRefused, SdoServer
+from hopper_ros.canbus.cia301.values import decode, encode
 from hopper_ros.canbus.epos2_objects import (
     Command,
-    DataType,
     NmtCommand,
     NmtState,
     OperationMode,
@@ -40,11 +46,9 @@ log = logging.getLogger(__name__)
 
 _MILLI = 1.0e-3
 _MS = 1.0e-3                       # [s/ms]
-_INHIBIT_UNIT = 100.0e-6           # [s] unit of the TPDO inhibit time (CiA 301)
 #: time constant of the "averaged" feedback objects 0x2027 / 0x2028 [s] (emulation choice)
 AVERAGING_TIME_CONSTANT = 0.01
 _ENABLED_STATES = (State.OPERATION_ENABLED,)
-_MAX_SDO_SEGMENTED_SIZE = 1024     # [bytes] largest segmented download accepted
 _SAMPLE_TOLERANCE = 0.999          # a control() call this close to one loop period counts as one
 
 # The drive's side of CiA 402 device control: a command is (controlword mask, value); per state, the
@@ -64,37 +68,6 @@ _TRANSITIONS = {
 }
 
 
-class SdoError(Exception):
-    """An SDO request the dictionary refuses, with its CiA 301 abort code."""
-
-    def __init__(self, code: int):
-        super().__init__(od.sdo_abort_text(code))
-        self.code = int(code)
-
-
-@dataclass
-class _SdoTransfer:
-    """State of a segmented SDO transfer in progress."""
-
-    upload: bool
-    index: int
-    subindex: int
-    data: bytearray = field(default_factory=bytearray)
-    size: int | None = None
-    toggle: int = 0
-    offset: int = 0
-
-
-@dataclass
-class _Counters:
-    malformed_frames: int = 0
-    sdo_aborts: int = 0
-    emcy_sent: int = 0
-    rpdos_applied: int = 0
-    tpdos_sent: int = 0
-    syncs: int = 0
-
-
 class Epos2Emulator:
     """The emulated EPOS2. See the module docstring for the calling contract."""
 
@@ -104,9 +77,12 @@ class Epos2Emulator:
         self._hardware = hardware
         self._table = od.object_dictionary(self.node_id)
         self._indices = {index for index, _ in self._table}
-        self.counters = _Counters()
+        self.counters = Counters()
         self.regulator = PositionRegulator.from_hardware(hardware)
         self._values: dict[tuple[int, int], int | str] = {}
+        self.sdo = SdoServer(self.node_id, self, self._send, self.counters, MAX_SEGMENTED_SIZE)
+        self.pdos = PdoEngine(self._table, self._values, self._send, self.counters,
+                              lambda: self.nmt_state == NmtState.OPERATIONAL, self._store, self._raise_error)
         self._reset_all()
         self.nmt_state = NmtState.PRE_OPERATIONAL
         self._send_bootup()
@@ -134,11 +110,8 @@ class Epos2Emulator:
         for key, value in self._config_defaults().items():
             if key[0] < 0x2000:
                 self._values[key] = value
-        self._sdo: _SdoTransfer | None = None
-        self._sync_counts = [0] * od.PDO_COUNT
-        self._pending_rpdos: dict[int, bytes] = {}
-        self._tpdo_last_data: list[bytes | None] = [None] * od.PDO_COUNT
-        self._tpdo_last_time: list[float | None] = [None] * od.PDO_COUNT
+        self.sdo.reset()
+        self.pdos.reset()
         self._next_heartbeat: float | None = None
         self._consumer_last: float | None = None
         self._error_history: list[int] = []
@@ -226,14 +199,14 @@ class Epos2Emulator:
             self._on_consumer_heartbeat(cob, data, now)
             return
         if msg.is_remote_frame:
-            self._on_remote(cob, now)
+            self.pdos.on_remote(cob, now)
             return
         if cob == od.sdo_rx_cob_id(self.node_id):
-            self._on_sdo(data, now)
+            self.sdo.on_frame(data)
         elif cob == int(self._values[(od.COB_ID_SYNC, 0)]) & od.COB_ID_MASK_11BIT:
-            self._on_sync(data, now)
-        elif self._rpdo_number(cob) is not None:
-            self._on_rpdo(self._rpdo_number(cob), data, now)
+            self.pdos.on_sync(data, now)
+        elif self.pdos.rpdo_number(cob) is not None:
+            self.pdos.on_rpdo(self.pdos.rpdo_number(cob), data, now)
         else:
             self._on_consumer_heartbeat(cob, data, now)
 
@@ -394,7 +367,7 @@ class Epos2Emulator:
         self.demand = self._regulate(now, int(v[(od.POSITION_ACTUAL_VALUE, 0)]))
         v[(od.CURRENT_DEMAND_VALUE, 0)] = round(self.demand / _MILLI)
         if self.nmt_state == NmtState.OPERATIONAL:
-            self._event_tpdos(now)
+            self.pdos.event_tpdos(now)
         return self.demand
 
     def _regulate(self, now: float, position: int) -> float:
@@ -426,317 +399,59 @@ class Epos2Emulator:
             return 0.0
         return self.regulator.update(setpoint, position)
 
-    # ---------------------------------------------------------------- PDOs and SYNC
-
-    def _pdo_cob(self, comm_index: int) -> int | None:
-        cob = int(self._values[(comm_index, od.PDO_COB_ID_SUB)])
-        return None if cob & od.COB_ID_INVALID_BIT else cob & od.COB_ID_MASK_11BIT
-
-    def _rpdo_number(self, cob: int) -> int | None:
-        for n in range(od.PDO_COUNT):
-            if self._pdo_cob(od.RPDO_COMMUNICATION + n) == cob:
-                return n
-        return None
-
-    def _mapping(self, map_index: int) -> list[tuple[int, int, int]]:
-        count = int(self._values[(map_index, 0)])
-        return [od.split_pdo_mapping_entry(int(self._values[(map_index, s)])) for s in range(1, count + 1)]
-
-    def _on_rpdo(self, n: int, data: bytes, now: float) -> None:
-        if self.nmt_state != NmtState.OPERATIONAL:
-            return
-        mapping = self._mapping(od.RPDO_MAPPING + n)
-        length = sum(bits for _, _, bits in mapping) // 8
-        if len(data) != length:
-            self.counters.malformed_frames += 1
-            self._raise_error(od.ERROR_PDO_LENGTH, now)
-            return
-        trans = int(self._values[(od.RPDO_COMMUNICATION + n, od.PDO_TRANSMISSION_TYPE_SUB)])
-        if trans <= od.TRANSMISSION_SYNC_MAX:
-            self._pending_rpdos[n] = data        # applied at the next SYNC
-        else:
-            self._apply_rpdo(n, data)
-
-    def _apply_rpdo(self, n: int, data: bytes) -> None:
-        offset = 0
-        for index, sub, bits in self._mapping(od.RPDO_MAPPING + n):
-            size = bits // 8
-            chunk = data[offset:offset + size]
-            offset += size
-            entry = self._table.get((index, sub))
-            if entry is None:                    # dummy mapping (data types 0x0001..0x0007)
-                continue
-            self._store(entry, _decode(entry.data_type, chunk))
-        self.counters.rpdos_applied += 1
-
-    def _on_sync(self, data: bytes, now: float) -> None:
-        if len(data) > 1:
-            self.counters.malformed_frames += 1
-            return
-        if self.nmt_state != NmtState.OPERATIONAL:
-            return
-        self.counters.syncs += 1
-        for n in sorted(self._pending_rpdos):
-            self._apply_rpdo(n, self._pending_rpdos[n])
-        self._pending_rpdos.clear()
-        for n in range(od.PDO_COUNT):
-            comm = od.TPDO_COMMUNICATION + n
-            if self._pdo_cob(comm) is None:
-                continue
-            trans = int(self._values[(comm, od.PDO_TRANSMISSION_TYPE_SUB)])
-            if trans == od.TRANSMISSION_SYNC_ACYCLIC:
-                payload = self._tpdo_payload(n)
-                if payload != self._tpdo_last_data[n]:
-                    self._send_tpdo(n, payload, now)
-            elif trans <= od.TRANSMISSION_SYNC_MAX:
-                self._sync_counts[n] += 1
-                if self._sync_counts[n] >= trans:
-                    self._sync_counts[n] = 0
-                    self._send_tpdo(n, self._tpdo_payload(n), now)
-
-    def _tpdo_payload(self, n: int) -> bytes:
-        out = bytearray()
-        for index, sub, bits in self._mapping(od.TPDO_MAPPING + n):
-            entry = self._table[(index, sub)]
-            out += _encode(entry.data_type, self._values[(index, sub)])[: bits // 8]
-        return bytes(out)
-
-    def _send_tpdo(self, n: int, payload: bytes, now: float) -> None:
-        cob = self._pdo_cob(od.TPDO_COMMUNICATION + n)
-        if cob is None:
-            return
-        self._send(cob, payload)
-        self._tpdo_last_data[n] = payload
-        self._tpdo_last_time[n] = now
-        self.counters.tpdos_sent += 1
-
-    def _event_tpdos(self, now: float) -> None:
-        for n in range(od.PDO_COUNT):
-            comm = od.TPDO_COMMUNICATION + n
-            if self._pdo_cob(comm) is None:
-                continue
-            if int(self._values[(comm, od.PDO_TRANSMISSION_TYPE_SUB)]) < od.TRANSMISSION_EVENT_MANUFACTURER:
-                continue
-            last = self._tpdo_last_time[n]
-            inhibit = int(self._values[(comm, od.PDO_INHIBIT_TIME_SUB)]) * _INHIBIT_UNIT
-            if last is not None and now - last < inhibit:
-                continue
-            payload = self._tpdo_payload(n)
-            timer = int(self._values[(comm, od.PDO_EVENT_TIMER_SUB)]) * _MS
-            due = timer > 0 and (last is None or now - last >= timer)
-            if payload != self._tpdo_last_data[n] or due:
-                self._send_tpdo(n, payload, now)
-
-    def _on_remote(self, cob: int, now: float) -> None:
-        for n in range(od.PDO_COUNT):
-            comm = od.TPDO_COMMUNICATION + n
-            raw = int(self._values[(comm, od.PDO_COB_ID_SUB)])
-            if self._pdo_cob(comm) == cob and not raw & od.COB_ID_NO_RTR_BIT:
-                self._send_tpdo(n, self._tpdo_payload(n), now)
-
-    # ---------------------------------------------------------------- SDO server
-
-    def _on_sdo(self, data: bytes, now: float) -> None:
-        if len(data) != od.SDO_FRAME_LENGTH:
-            self.counters.malformed_frames += 1
-            padded = data.ljust(4, b"\0")
-            index, sub = struct.unpack_from("<HB", padded, 1)
-            self._sdo_abort(index, sub, SdoAbort.UNKNOWN_COMMAND)
-            return
-        ccs = data[0] >> 5
-        index, sub = struct.unpack_from("<HB", data, 1)
-        try:
-            if ccs == od.SDO_CS_ABORT:
-                self._sdo = None                 # the client aborted: no answer
-            elif ccs == od.SDO_CCS_INITIATE_UPLOAD:
-                self._sdo = None
-                self._initiate_upload(index, sub)
-            elif ccs == od.SDO_CCS_INITIATE_DOWNLOAD:
-                self._sdo = None
-                self._initiate_download(data, index, sub)
-            elif ccs == od.SDO_CCS_UPLOAD_SEGMENT:
-                self._upload_segment(data)
-            elif ccs == od.SDO_CCS_DOWNLOAD_SEGMENT:
-                self._download_segment(data)
-            else:                                # block transfers and reserved specifiers
-                raise SdoError(SdoAbort.UNKNOWN_COMMAND)
-        except SdoError as exc:
-            if self._sdo is not None:
-                index, sub = self._sdo.index, self._sdo.subindex
-            self._sdo = None
-            self._sdo_abort(index, sub, exc.code)
-
-    def _sdo_reply(self, data: bytes) -> None:
-        self._send(od.sdo_tx_cob_id(self.node_id), data.ljust(od.SDO_FRAME_LENGTH, b"\0"))
-
-    def _sdo_abort(self, index: int, sub: int, code: int) -> None:
-        self.counters.sdo_aborts += 1
-        self._sdo_reply(struct.pack("<BHBI", od.SDO_ABORT_BYTE, index, sub, int(code)))
-
-    def _initiate_upload(self, index: int, sub: int) -> None:
-        raw = self.read(index, sub)
-        if len(raw) <= 4:
-            cmd = (od.SDO_SCS_INITIATE_UPLOAD << 5) | ((4 - len(raw)) << 2) | od.SDO_EXPEDITED_BIT | od.SDO_SIZE_BIT
-            self._sdo_reply(struct.pack("<BHB", cmd, index, sub) + raw)
-        else:
-            self._sdo = _SdoTransfer(upload=True, index=index, subindex=sub, data=bytearray(raw))
-            cmd = (od.SDO_SCS_INITIATE_UPLOAD << 5) | od.SDO_SIZE_BIT
-            self._sdo_reply(struct.pack("<BHBI", cmd, index, sub, len(raw)))
-
-    def _upload_segment(self, data: bytes) -> None:
-        t = self._sdo
-        if t is None or not t.upload:
-            raise SdoError(SdoAbort.UNKNOWN_COMMAND)
-        toggle = (data[0] >> 4) & 1
-        if toggle != t.toggle:
-            raise SdoError(SdoAbort.TOGGLE_BIT_NOT_ALTERNATED)
-        chunk = bytes(t.data[t.offset:t.offset + 7])
-        t.offset += len(chunk)
-        last = t.offset >= len(t.data)
-        cmd = (od.SDO_SCS_UPLOAD_SEGMENT << 5) | (toggle << 4) | ((7 - len(chunk)) << 1) | (1 if last else 0)
-        self._sdo_reply(bytes([cmd]) + chunk)
-        t.toggle ^= 1
-        if last:
-            self._sdo = None
-
-    def _initiate_download(self, data: bytes, index: int, sub: int) -> None:
-        cmd = data[0]
-        if cmd & od.SDO_EXPEDITED_BIT:
-            if cmd & od.SDO_SIZE_BIT:
-                payload = data[4:8 - ((cmd >> 2) & 0x3)]
-            else:
-                payload = data[4:8]              # size not indicated: the object's own size
-                size = self._size_of(index, sub)
-                payload = payload[:size] if size is not None else payload.rstrip(b"\0")
-            self.write(index, sub, payload)
-            self._sdo_reply(struct.pack("<BHB", od.SDO_SCS_INITIATE_DOWNLOAD << 5, index, sub))
-            return
-        self._check_writable(index, sub)
-        size = struct.unpack_from("<I", data, 4)[0] if cmd & od.SDO_SIZE_BIT else None
-        if size is not None and size > _MAX_SDO_SEGMENTED_SIZE:
-            raise SdoError(SdoAbort.OUT_OF_MEMORY)
-        self._sdo = _SdoTransfer(upload=False, index=index, subindex=sub, size=size)
-        self._sdo_reply(struct.pack("<BHB", od.SDO_SCS_INITIATE_DOWNLOAD << 5, index, sub))
-
-    def _download_segment(self, data: bytes) -> None:
-        t = self._sdo
-        if t is None or t.upload:
-            raise SdoError(SdoAbort.UNKNOWN_COMMAND)
-        toggle = (data[0] >> 4) & 1
-        if toggle != t.toggle:
-            raise SdoError(SdoAbort.TOGGLE_BIT_NOT_ALTERNATED)
-        unused = (data[0] >> 1) & 0x7
-        t.data += data[1:8 - unused]
-        if len(t.data) > _MAX_SDO_SEGMENTED_SIZE:
-            raise SdoError(SdoAbort.OUT_OF_MEMORY)
-        last = bool(data[0] & od.SDO_SEGMENT_LAST_BIT)
-        if last:
-            if t.size is not None and t.size != len(t.data):
-                raise SdoError(SdoAbort.LENGTH_MISMATCH)
-            self.write(t.index, t.subindex, bytes(t.data))
-        self._sdo_reply(bytes([(od.SDO_SCS_DOWNLOAD_SEGMENT << 5) | (toggle << 4)]))
-        t.toggle ^= 1
-        if last:
-            self._sdo = None
-
     # ---------------------------------------------------------------- dictionary access
 
     def _entry(self, index: int, sub: int) -> od.ODEntry:
         entry = self._table.get((index, sub))
         if entry is None:
-            raise SdoError(SdoAbort.OBJECT_DOES_NOT_EXIST if index not in self._indices
+            raise SdoRefused(SdoAbort.OBJECT_DOES_NOT_EXIST if index not in self._indices
                            else SdoAbort.SUBINDEX_DOES_NOT_EXIST)
         return entry
 
-    def _size_of(self, index: int, sub: int) -> int | None:
+    def size_of(self, index: int, sub: int) -> int | None:
         return od.data_type_size(self._entry(index, sub).data_type)
 
-    def _check_writable(self, index: int, sub: int) -> od.ODEntry:
+    def check_writable(self, index: int, sub: int) -> od.ODEntry:
         entry = self._entry(index, sub)
         if not entry.access.writable:
-            raise SdoError(SdoAbort.READ_ONLY)
+            raise SdoRefused(SdoAbort.READ_ONLY)
         return entry
 
     def read(self, index: int, sub: int) -> bytes:
-        """SDO upload of one entry as bytes; raises SdoError with the abort code."""
+        """SDO upload of one entry as bytes; raises SdoRefused with the abort code."""
         entry = self._entry(index, sub)
         if not entry.access.readable:
-            raise SdoError(SdoAbort.WRITE_ONLY)
-        return _encode(entry.data_type, self._values[(index, sub)])
+            raise SdoRefused(SdoAbort.WRITE_ONLY)
+        return encode(entry.data_type, self._values[(index, sub)])
 
     def write(self, index: int, sub: int, payload: bytes) -> None:
-        """SDO download of one entry; raises SdoError with the abort code."""
-        entry = self._check_writable(index, sub)
+        """SDO download of one entry; raises SdoRefused with the abort code."""
+        entry = self.check_writable(index, sub)
         size = od.data_type_size(entry.data_type)
         if size is not None and len(payload) != size:
-            raise SdoError(SdoAbort.LENGTH_MISMATCH)
-        value = _decode(entry.data_type, payload)
+            raise SdoRefused(SdoAbort.LENGTH_MISMATCH)
+        value = decode(entry.data_type, payload)
         self._validate(entry, value)
         self._store(entry, value)
 
     def _validate(self, entry: od.ODEntry, value: int | str) -> None:
         index, sub = entry.index, entry.subindex
-        v = self._values
         if index == od.ERROR_HISTORY and sub == 0 and value != 0:
-            raise SdoError(SdoAbort.INVALID_VALUE)
+            raise SdoRefused(SdoAbort.INVALID_VALUE)
         if index == od.STORE_PARAMETERS and value != od.STORE_SIGNATURE:
-            raise SdoError(SdoAbort.CANNOT_TRANSFER)
+            raise SdoRefused(SdoAbort.CANNOT_TRANSFER)
         if index == od.RESTORE_DEFAULT_PARAMETERS and value != od.RESTORE_SIGNATURE:
-            raise SdoError(SdoAbort.CANNOT_TRANSFER)
+            raise SdoRefused(SdoAbort.CANNOT_TRANSFER)
         if index == od.MODES_OF_OPERATION and value not in set(OperationMode):
-            raise SdoError(SdoAbort.INVALID_VALUE)
+            raise SdoRefused(SdoAbort.INVALID_VALUE)
         if index == od.NODE_ID and not od.NODE_ID_MIN <= int(value) <= od.NODE_ID_MAX:
-            raise SdoError(SdoAbort.INVALID_VALUE)
+            raise SdoRefused(SdoAbort.INVALID_VALUE)
         if index == od.MOTOR_DATA and sub in (od.MOTOR_CONTINUOUS_CURRENT_LIMIT_SUB,
                                               od.MOTOR_OUTPUT_CURRENT_LIMIT_SUB) and value == 0:
-            raise SdoError(SdoAbort.VALUE_TOO_LOW)
+            raise SdoRefused(SdoAbort.VALUE_TOO_LOW)
         if index == od.CONSUMER_HEARTBEAT_TIME and (int(value) >> 16) & 0xFF == self.node_id and value & 0xFFFF:
-            raise SdoError(SdoAbort.PARAMETER_INCOMPATIBILITY)
-        pdo = _pdo_kind(index)
-        if pdo is None:
-            return
-        kind, comm, mapping, n = pdo
-        valid = not int(v[(comm, od.PDO_COB_ID_SUB)]) & od.COB_ID_INVALID_BIT
-        if index == comm and sub == od.PDO_COB_ID_SUB:
-            old = int(v[(comm, od.PDO_COB_ID_SUB)])
-            new_valid = not int(value) & od.COB_ID_INVALID_BIT
-            if int(value) & 0x20000000 or (int(value) & 0x1FFFF800):
-                raise SdoError(SdoAbort.INVALID_VALUE)   # 29-bit identifiers are not supported
-            if valid and new_valid and (int(value) ^ old) & od.COB_ID_MASK_11BIT:
-                raise SdoError(SdoAbort.INVALID_VALUE)   # change the COB-ID only while disabled
-        elif index == comm and sub == od.PDO_TRANSMISSION_TYPE_SUB:
-            if od.TRANSMISSION_SYNC_MAX < int(value) < od.TRANSMISSION_EVENT_MANUFACTURER:
-                raise SdoError(SdoAbort.INVALID_VALUE)
-        elif index == mapping:
-            if valid:
-                raise SdoError(SdoAbort.UNSUPPORTED_ACCESS)  # disable the PDO first (CiA 301)
-            if sub == 0:
-                if int(value) > od.PDO_MAX_ENTRIES:
-                    raise SdoError(SdoAbort.PDO_LENGTH_EXCEEDED)
-                entries = [od.split_pdo_mapping_entry(int(v[(mapping, s)])) for s in range(1, int(value) + 1)]
-                for e in entries:
-                    self._check_mappable(kind, *e)
-                if sum(bits for _, _, bits in entries) > 64:
-                    raise SdoError(SdoAbort.PDO_LENGTH_EXCEEDED)
-            else:
-                if int(v[(mapping, 0)]) != 0:
-                    raise SdoError(SdoAbort.UNSUPPORTED_ACCESS)  # set sub 0 to 0 first (CiA 301)
-                if int(value) != 0:
-                    self._check_mappable(kind, *od.split_pdo_mapping_entry(int(value)))
-
-    def _check_mappable(self, kind: str, index: int, sub: int, bits: int) -> None:
-        if kind == "RPDO" and 1 <= index <= 7 and sub == 0:
-            size = od.data_type_size(DataType(index)) if index in set(DataType) else None
-            if size is None or bits != 8 * size:
-                raise SdoError(SdoAbort.CANNOT_BE_MAPPED)
-            return                                # dummy mapping
-        entry = self._table.get((index, sub))
-        if entry is None:
-            raise SdoError(SdoAbort.OBJECT_DOES_NOT_EXIST)
-        size = od.data_type_size(entry.data_type)
-        usable = entry.access.writable if kind == "RPDO" else entry.access.readable
-        if not entry.pdo_mappable or not usable or size is None or bits != 8 * size:
-            raise SdoError(SdoAbort.CANNOT_BE_MAPPED)
+            raise SdoRefused(SdoAbort.PARAMETER_INCOMPATIBILITY)
+        self.pdos.validate(entry, value)              # the CiA 301 rules of the PDO objects
 
     def _store(self, entry: od.ODEntry, value: int | str) -> None:
         key = (entry.index, entry.subindex)
@@ -755,39 +470,11 @@ class Epos2Emulator:
             self._next_heartbeat = None
         elif entry.index == od.CONSUMER_HEARTBEAT_TIME:
             self._consumer_last = None
-        elif _pdo_kind(entry.index) is not None:
-            kind, comm, _, n = _pdo_kind(entry.index)
-            if kind == "TPDO":
-                self._tpdo_last_data[n] = None
-                self._sync_counts[n] = 0
-            else:
-                self._pending_rpdos.pop(n, None)
+        else:
+            self.pdos.stored(entry.index)
 
 
 # -------------------------------------------------------------------- helpers
-
-
-def _pdo_kind(index: int) -> tuple[str, int, int, int] | None:
-    """('RPDO' or 'TPDO', communication index, mapping index, number 0..3) of a PDO object."""
-    for kind, comm, mapping in (("RPDO", od.RPDO_COMMUNICATION, od.RPDO_MAPPING),
-                                ("TPDO", od.TPDO_COMMUNICATION, od.TPDO_MAPPING)):
-        for base in (comm, mapping):
-            if base <= index < base + od.PDO_COUNT:
-                n = index - base
-                return kind, comm + n, mapping + n, n
-    return None
-
-
-def _encode(data_type: DataType, value: int | str) -> bytes:
-    if data_type == DataType.VISIBLE_STRING:
-        return str(value).encode("latin-1")
-    return struct.pack(od.DATA_TYPE_FORMAT[DataType(data_type)], int(value))
-
-
-def _decode(data_type: DataType, payload: bytes) -> int | str:
-    if data_type == DataType.VISIBLE_STRING:
-        return payload.decode("latin-1")
-    return struct.unpack(od.DATA_TYPE_FORMAT[DataType(data_type)], payload)[0]
 
 
 def _wrap_i32(value: int) -> int:

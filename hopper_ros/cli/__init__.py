@@ -13,7 +13,7 @@ import importlib
 import sys
 from typing import Sequence
 
-from hopper_ros.environment import RosEnvironmentError, apply_ros_environment
+from hopper_ros.runtime.environment import RosEnvironmentError, apply_ros_environment
 
 COMMANDS = {
     "run": "hopper_ros.cli.run",

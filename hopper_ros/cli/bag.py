@@ -6,7 +6,7 @@
 
 `record` runs until Ctrl-C (SIGINT) or SIGTERM, then finishes the MCAP and writes
 metadata.yaml (exit 0). Killed harder, the bag keeps every closed chunk; `info` reads it and
-says it is unfinished, `recover` makes it complete. Format: hopper_ros/recording/bag.py.
+says it is unfinished, `recover` makes it complete. Format: hopper_ros/recording/bag/.
 """
 
 from __future__ import annotations

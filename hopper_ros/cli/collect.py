@@ -63,7 +63,7 @@ def main(args: argparse.Namespace) -> int:
     from hopper_ros.harness.collect import CollectionSettings, collect
     from hopper_ros.identification.progress import ProgressBar
     from hopper_ros.recording.bag import BagError
-    from hopper_ros.schema import ConfigError
+    from hopper_ros.config.schema import ConfigError
     from hopper_ros.sim.config import SENSORS, load_sim_config
 
     try:

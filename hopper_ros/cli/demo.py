@@ -27,8 +27,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from hopper_ros.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority, realtime_scheduling_allowed
-from hopper_ros.launcher import launch_file_path
+from hopper_ros.runtime.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority, realtime_scheduling_allowed
+from hopper_ros.launch import launch_file_path
 
 HELP = "run the closed-loop Fig 5.5 demo on the simulated robot and report it"
 DEFAULT_LAUNCH = "demo.launch.yaml"

@@ -29,8 +29,8 @@ def _main(args: argparse.Namespace) -> int:
     from hopper_ros.diagnosis.progress import Progress
     from hopper_ros.recording.recordings import RecordingError
 
-    from hopper_ros.config_schemas import load_model
-    from hopper_ros.schema import ConfigError
+    from hopper_ros.config.schemas import load_model
+    from hopper_ros.config.schema import ConfigError
 
     try:
         load_model(args.model)                          # its schema first: one line naming file and key

@@ -51,7 +51,7 @@ def _main(args: argparse.Namespace) -> int:
     from hopper_ros.recording.recordings import RecordingError
     from hopper_ros.identification.settings import load_settings
     from hopper_ros.recording.bag import BagError
-    from hopper_ros.schema import ConfigError
+    from hopper_ros.config.schema import ConfigError
 
     try:
         settings = load_settings(args.config)

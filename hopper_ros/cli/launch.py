@@ -2,7 +2,7 @@
 or node_container a process, and supervise them, like `ros2 launch hopper_ros FILE NAME:=VALUE`.
 
 FILE is a path or a file of launch/ (`demo.launch.yaml`). Launch files are ros2 launch's YAML
-format; what is supported of it, output and stop behaviour: hopper_ros/launcher.py.
+format; what is supported of it, output and stop behaviour: hopper_ros/launch/__init__.py.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def split_words(words: list[str]) -> tuple[str | None, str, dict[str, str]]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from hopper_ros.launcher import LaunchFileError, Launcher, load_launch
+    from hopper_ros.launch import LaunchFileError, Launcher, load_launch
 
     try:
         package, file, arguments = split_words(args.words)

@@ -15,9 +15,9 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
-    from hopper_ros.config_schemas import load_model
+    from hopper_ros.config.schemas import load_model
     from hopper_ros.reports.predictors import write_predictor_report
-    from hopper_ros.schema import ConfigError
+    from hopper_ros.config.schema import ConfigError
 
     if args.strides < 10:
         raise SystemExit("hopper predictors: --strides must be at least 10")

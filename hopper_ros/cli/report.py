@@ -46,7 +46,7 @@ def _main(args: argparse.Namespace) -> int:
     from hopper_ros.recording.bag import BagError
     from hopper_ros.recording.recordings import RecordingError
     from hopper_ros.reports.identification import write_report
-    from hopper_ros.schema import ConfigError
+    from hopper_ros.config.schema import ConfigError
     from hopper_ros.sim.config import SENSORS, load_sim_config
 
     out = Path(args.output)

@@ -20,7 +20,7 @@ import os
 import sys
 import time
 
-from hopper_ros.messages import DEFAULT_TRUNCATE_LENGTH, message_class, message_to_yaml
+from hopper_ros.runtime.messages import DEFAULT_TRUNCATE_LENGTH, message_class, message_to_yaml
 
 HELP = "list topics, or print the messages of one as YAML (like `ros2 topic`)"
 

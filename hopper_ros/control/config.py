@@ -1,5 +1,5 @@
 """config/control.yaml as typed settings: `load_control(name)` reads and checks the file once
-(schema hopper_ros.config_schemas.CONTROL; a bad file is one ConfigError line naming the file,
+(schema hopper_ros.config.schemas.CONTROL; a bad file is one ConfigError line naming the file,
 the key and what is wrong) and returns `ControlConfig`. No ROS import."""
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ class ControlConfig:
 def load_control(name: str | os.PathLike = "control.yaml") -> ControlConfig:
     """control.yaml (a config/ name or a path), checked and typed."""
     from hopper_ros.config import config_path
-    from hopper_ros.config_schemas import CONTROL
-    from hopper_ros.schema import load_config
+    from hopper_ros.config.schemas import CONTROL
+    from hopper_ros.config.schema import load_config
 
     values = load_config(name, CONTROL)
     return ControlConfig(DeadbeatSettings.from_mapping(values["deadbeat"], str(config_path(name))),

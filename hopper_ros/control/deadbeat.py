@@ -68,9 +68,9 @@ class DeadbeatSettings:
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "deadbeat settings") -> "DeadbeatSettings":
         """Settings from a `deadbeat` section (missing keys: the defaults), checked by the schema of
-        control.yaml (hopper_ros.config_schemas.CONTROL): types, ranges with units, min < max."""
-        from hopper_ros.config_schemas import CONTROL
-        from hopper_ros.schema import Section, validate
+        control.yaml (hopper_ros.config.schemas.CONTROL): types, ranges with units, min < max."""
+        from hopper_ros.config.schemas import CONTROL
+        from hopper_ros.config.schema import Section, validate
 
         defaults = {name: getattr(cls, name) for name in cls.__dataclass_fields__}
         section = Section({"deadbeat": CONTROL.fields["deadbeat"]})

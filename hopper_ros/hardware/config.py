@@ -1,7 +1,7 @@
 """config/hardware.yaml as one frozen, typed object, `HardwareConfig`. No ROS import.
 
 `load_hardware(name)` is the one place the file is read: checked by its schema
-(`hopper_ros.config_schemas.HARDWARE`: types, ranges with units, unknown keys refused; a bad
+(`hopper_ros.config.schemas.HARDWARE`: types, ranges with units, unknown keys refused; a bad
 file is one `ConfigError` line naming the file, the key and what is wrong), then built into the
 dataclasses below. Field names are the file's keys; values are SI (m, s, A, N m, kg m^2) unless
 a name says otherwise (counts, lines, the drive's own gain units).
@@ -121,7 +121,7 @@ class HardwareConfig:
 
 def load_hardware(name: str | os.PathLike = "hardware.yaml") -> HardwareConfig:
     """config/hardware.yaml (a config/ name or a path; `base:` variants merged), checked and typed."""
-    from hopper_ros.config_schemas import HARDWARE
-    from hopper_ros.schema import load_config
+    from hopper_ros.config.schemas import HARDWARE
+    from hopper_ros.config.schema import load_config
 
     return HardwareConfig.from_values(load_config(name, HARDWARE))

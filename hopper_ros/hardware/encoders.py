@@ -20,10 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from hopper_ros.hardware.config import HardwareConfig
+from typing import Any, Protocol
 
 COUNTER_MODULUS = 1 << 32
 _HALF = 1 << 31
@@ -98,6 +95,17 @@ class BoomPosition:
     leg_angle: float      # [rad], positive toe ahead of the body
 
 
+class HardwareSections(Protocol):
+    """What `BoomKinematics.from_config` reads of a hardware configuration (`hardware.config.HardwareConfig`;
+    named structurally, so that this module does not import the configuration that imports it)."""
+
+    @property
+    def boom(self) -> Any: ...
+
+    @property
+    def encoders(self) -> Any: ...
+
+
 @dataclass(frozen=True)
 class BoomKinematics:
     """Boom geometry and the three encoders of appendix A."""
@@ -111,7 +119,7 @@ class BoomKinematics:
     motor: Encoder
 
     @classmethod
-    def from_config(cls, hardware: "HardwareConfig") -> "BoomKinematics":
+    def from_config(cls, hardware: HardwareSections) -> "BoomKinematics":
         boom, encoders = hardware.boom, hardware.encoders
         return cls(boom.length, boom.parallel_height, boom.leg_offset, boom.ground_height,
                    encoders.azimuth, encoders.elevation, encoders.motor)

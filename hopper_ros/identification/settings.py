@@ -87,10 +87,10 @@ class IdentificationSettings:
 
 def settings_from_dict(data: Mapping[str, Any], source: str = "identification settings") -> IdentificationSettings:
     """From the parsed file (with or without the `identification:` level), checked by its schema
-    (hopper_ros.config_schemas.IDENTIFICATION: types, ranges with units, unknown and missing keys),
+    (hopper_ros.config.schemas.IDENTIFICATION: types, ranges with units, unknown and missing keys),
     then across keys (`_validate`: bounds, the initial point inside them)."""
-    from hopper_ros.config_schemas import IDENTIFICATION
-    from hopper_ros.schema import validate
+    from hopper_ros.config.schemas import IDENTIFICATION
+    from hopper_ros.config.schema import validate
 
     if not (isinstance(data, Mapping) and "identification" in data):
         data = {"identification": data}
@@ -142,7 +142,7 @@ def _validate(s: IdentificationSettings, source: str) -> None:
         raise ValueError(f"{source}: lanes needs 0 < step <= 0.002, duration_factor >= 1, 0 < fd_step < 0.1, "
                          f"max_iterations >= 1, polish_iterations >= 0, initial_radius > 0, batch_lanes >= 1; got {lanes}")
     if s.effects:
-        from hopper_ros.config_schemas import check_effects
+        from hopper_ros.config.schemas import check_effects
 
         try:
             check_effects(s.effects, s.fitted)

@@ -9,7 +9,7 @@ A node module defines its `rclpy.node.Node` subclass (a thin adapter over a plai
 initialises rclpy with `args` (None: `sys.argv`, so `--ros-args ...` work as with `ros2 run`),
 builds the node (with normal scheduling: a respawned node's start-up must not starve the running
 loop), puts every thread of the process on SCHED_FIFO when HOPPER_REALTIME_PRIORITY asks
-(hopper_ros.environment), logs its startup (pid, domain id, discovery range; scheduling), freezes the start-up's
+(hopper_ros.runtime.environment), logs its startup (pid, domain id, discovery range; scheduling), freezes the start-up's
 objects for the garbage collector (gc.freeze: a full collection walked all of them, a 50 ms pause of
 every thread; a pause over GC_PAUSE_WARNING is logged) and spins it on rclpy's
 EventsExecutor (HOPPER_EXECUTOR=single: the SingleThreadedExecutor). The events executor costs a
@@ -31,7 +31,7 @@ import time
 import traceback
 from typing import Any, Callable, Sequence
 
-from hopper_ros.environment import (RosEnvironmentError, apply_realtime_priority, apply_ros_environment,
+from hopper_ros.runtime.environment import (RosEnvironmentError, apply_realtime_priority, apply_ros_environment,
                                     dds_network, realtime_priority)
 from hopper_ros.nodes.signals import StopSignals
 

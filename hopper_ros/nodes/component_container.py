@@ -1,7 +1,7 @@
 """component_container: several hopper_ros nodes in one process, on one executor.
 
 What `hopper launch` runs for a launch file's `node_container` entry (launch_ros's composable
-nodes; hopper_ros/launcher.py says what of the format is supported):
+nodes; hopper_ros/launch/__init__.py says what of the format is supported):
 
     hopper run component_container --ros-args -r __node:=sensing -- --components JSON
 

@@ -19,7 +19,7 @@ hopper_ros/control/stride_policy.py.
 
 A MotorCommand goes out at once when an input changes it (apex, gait event, setpoint, fault) and
 is repeated every `keep_alive` otherwise, which feeds the motor driver's watchdog: from a thread
-of its own (hopper_ros.periodic, SCHED_FIFO `keep_alive_priority_boost` above the node), on time
+of its own (hopper_ros.runtime.periodic, SCHED_FIFO `keep_alive_priority_boost` above the node), on time
 whatever the executor is busy with, as long as the executor itself ran within `executor_timeout`
 (control.yaml; a stuck executor stops the stream and the driver disables the drive). The node
 needs no state estimates, so it wakes at 333 Hz instead of with every 1 kHz sample. In
@@ -46,13 +46,13 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from hopper_ros.config_schemas import load_model
+from hopper_ros.config.schemas import load_model
 from hopper_ros.control.config import load_control
 from hopper_ros.control.deadbeat import DeadbeatController, StrideDecision
 from hopper_ros.control.stride_machine import Phase
 from hopper_ros.control.stride_policy import StridePolicy
-from hopper_ros.gaps import GapHistogram
-from hopper_ros.periodic import PeriodicThread
+from hopper_ros.runtime.gaps import GapHistogram
+from hopper_ros.runtime.periodic import PeriodicThread
 from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
 from hopper_ros.nodes.common import log_event, read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import (DIAGNOSTICS_TOPIC, ERROR, OK, WARN, DiagnosticsReporter, level_of,
@@ -107,7 +107,7 @@ class DeadbeatControllerNode(Node):
         self._command = MotorCommand()
         self.published_gaps = GapHistogram()       # the command stream as this node sends it
         self._published = math.nan
-        # The repeats come from a thread of their own (hopper_ros.periodic): an executor timer waited
+        # The repeats come from a thread of their own (hopper_ros.runtime.periodic): an executor timer waited
         # behind every callback of the process (in the demo's container, the 1 kHz sensing chain's) and
         # the stream had gaps of 10-30 ms under load. They go on only while this node's executor is
         # alive (`_tick`, every quarter of executor_timeout): a stuck executor stops them.

@@ -27,7 +27,7 @@ from rclpy.node import Node
 
 from hopper_ros.msg import ApexState, BodyState, GaitEvent
 from hopper_ros.nodes.common import run_node, sensing_parameters
-from hopper_ros.config_schemas import load_model
+from hopper_ros.config.schemas import load_model
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.sensing.events import EventDetector
 from hopper_ros.nodes.sensing_messages import (CounterDeltas, any_of, apex_state_msg,

@@ -10,9 +10,9 @@ and setpoint in force.
 Parameters:
   schedule_file (string, read only): the schedule, a path or relative to the config directory;
       default `setpoints/fig5_5.yaml` (config/setpoints/fig5_5.yaml, the thesis's Fig. 5.5 run).
-      Format and validation: hopper_ros.setpoints.
+      Format and validation: hopper_ros.control.setpoints.
 
-The schedule logic lives in hopper_ros.setpoints; this node only connects it to ROS.
+The schedule logic lives in hopper_ros.control.setpoints; this node only connects it to ROS.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from hopper_ros.msg import ApexState
 from hopper_ros.nodes.common import read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import OK, DiagnosticsReporter
 from hopper_ros.nodes.stamps import now_seconds
-from hopper_ros.setpoints import ScheduleRunner, load_schedule
+from hopper_ros.control.setpoints import ScheduleRunner, load_schedule
 
 DEFAULT_SCHEDULE = "setpoints/fig5_5.yaml"
 SETPOINT_TOPIC = "apex_setpoint"

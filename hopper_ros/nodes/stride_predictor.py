@@ -10,7 +10,7 @@ Parameters (read only):
   model_file (string): model parameters, default `model.yaml` (config/model.yaml, Table 4.1)
   predictor (string): "corrected" (default), "aas" or "exact"
 
-The logic lives in hopper_ros.stride_monitor; this node only connects it to ROS.
+The logic lives in hopper_ros.control.stride_monitor; this node only connects it to ROS.
 """
 
 from __future__ import annotations
@@ -21,11 +21,11 @@ from rclpy.node import Node
 
 from hopper_ros.msg import ApexState, StrideCommand
 from hopper_ros.nodes.common import read_only_parameters, run_node
-from hopper_ros.config_schemas import load_model
+from hopper_ros.config.schemas import load_model
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.nodes.stamps import to_seconds, to_stamp
 from hopper_ros.physics.predictors import DEFAULT_PREDICTOR
-from hopper_ros.stride_monitor import Apex, Command, StrideMonitor
+from hopper_ros.control.stride_monitor import Apex, Command, StrideMonitor
 
 
 class StridePredictor(Node):

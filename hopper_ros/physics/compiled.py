@@ -40,7 +40,7 @@ STATE = 7          # y, z, ydot, zdot, depth, applied torque (lag state), toe y
 
 def _sources_hash() -> str:
     digest = hashlib.sha256(numba.__version__.encode())
-    for name in ("compiled.py", "laws.py", "exact.py"):
+    for name in ("compiled.py", "laws.py", "broadcast.py", "terms.py", "exact.py"):
         digest.update((Path(__file__).parent / name).read_bytes())
     return digest.hexdigest()[:16]
 

@@ -32,7 +32,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable
 
-from hopper_ros.messages import message_class
+from hopper_ros.runtime.messages import message_class
 
 from .bag import BagWriter
 from .schemas import SchemaError, message_definition

@@ -239,7 +239,7 @@ def load_bag(path: str | os.PathLike) -> Recording:
     """The recording a bag of our recorder holds (finished or interrupted)."""
     from rclpy.serialization import deserialize_message
 
-    from hopper_ros.messages import message_class
+    from hopper_ros.runtime.messages import message_class
     from hopper_ros.recording.bag import BagReader
     from hopper_ros.recording.cdr import decode_columns
 

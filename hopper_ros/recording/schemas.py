@@ -23,7 +23,7 @@ import re
 from functools import lru_cache
 from pathlib import Path
 
-from hopper_ros.messages import split_type_name
+from hopper_ros.runtime.messages import split_type_name
 
 SEPARATOR = "=" * 80
 PRIMITIVES = frozenset({

@@ -1,7 +1,7 @@
 """Settings of the sensing nodes (config/sensing.yaml, section `sensing`). No ROS import.
 
 Every key of the file is a field here; the file is checked by its schema
-(hopper_ros/config_schemas.py SENSING: types, ranges with units, unknown and missing keys), so a
+(hopper_ros/config/schemas.py SENSING: types, ranges with units, unknown and missing keys), so a
 typo in the YAML never silently falls back to a default.
 """
 
@@ -77,9 +77,9 @@ class SensingConfig:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], source: str = "sensing config") -> "SensingConfig":
         """From the parsed file (with or without the `sensing:` level), validated by its schema
-        (hopper_ros.config_schemas.SENSING): errors name the file and the key."""
-        from hopper_ros.config_schemas import SENSING
-        from hopper_ros.schema import validate
+        (hopper_ros.config.schemas.SENSING): errors name the file and the key."""
+        from hopper_ros.config.schemas import SENSING
+        from hopper_ros.config.schema import validate
 
         if not (isinstance(data, Mapping) and "sensing" in data):
             data = {"sensing": data}

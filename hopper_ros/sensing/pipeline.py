@@ -34,7 +34,7 @@ class SensingPipeline:
     @classmethod
     def from_files(cls, sensing_file: str = "sensing.yaml", hardware: HardwareConfig | None = None,
                    model_file: str | None = None) -> "SensingPipeline":
-        from hopper_ros.config_schemas import load_model
+        from hopper_ros.config.schemas import load_model
 
         config = load_sensing_config(sensing_file)
         return cls(config, hardware if hardware is not None else load_hardware(config.hardware_file),

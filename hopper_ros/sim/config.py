@@ -229,12 +229,12 @@ class SimConfig:
 
 
 def load_sim_config(name: str | os.PathLike = DEFAULT_FILE) -> SimConfig:
-    """The file checked by its schema (hopper_ros.config_schemas.SIM: everything but sim.effects,
+    """The file checked by its schema (hopper_ros.config.schemas.SIM: everything but sim.effects,
     which `from_dict` checks against the effect library), then built; either's errors are
     ConfigError, one line naming the file and the key."""
     from hopper_ros.config import config_path
-    from hopper_ros.config_schemas import SIM
-    from hopper_ros.schema import ConfigError, load_config
+    from hopper_ros.config.schemas import SIM
+    from hopper_ros.config.schema import ConfigError, load_config
 
     data = load_config(name, SIM)
     try:

@@ -38,7 +38,7 @@ import can
 
 from hopper_ros.canbus import epos2_objects as eo
 from hopper_ros.canbus.epos2_objects import Command, NmtCommand, NmtState, OperationMode, State
-from hopper_ros.canbus.master import (
+from hopper_ros.canbus.cia301.master import (
     HeartbeatConsumer,
     MalformedFrame,
     SdoClient,
@@ -50,7 +50,7 @@ from hopper_ros.canbus.master import (
     nmt_state_name,
     sync_frame,
 )
-from hopper_ros.gaps import GapHistogram
+from hopper_ros.runtime.gaps import GapHistogram
 from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.physics.laws import ramp_torque
 

@@ -49,16 +49,16 @@ class DriverSettings:
     shutdown_timeout: float = 0.5       # [s] bound on shutdown()
 
     def __post_init__(self) -> None:
-        from hopper_ros.config_schemas import MOTOR_DRIVER_SECTION
-        from hopper_ros.schema import validate
+        from hopper_ros.config.schemas import MOTOR_DRIVER_SECTION
+        from hopper_ros.config.schema import validate
 
         validate(MOTOR_DRIVER_SECTION, {f.name: getattr(self, f.name) for f in fields(self)}, "motor_driver")
 
     @classmethod
     def from_mapping(cls, section: Mapping[str, Any], source: str = "motor_driver", **overrides: Any) -> "DriverSettings":
         """Settings from a `motor_driver` section (validated by its schema) and overrides (node parameters)."""
-        from hopper_ros.config_schemas import MOTOR_DRIVER_SECTION
-        from hopper_ros.schema import validate
+        from hopper_ros.config.schemas import MOTOR_DRIVER_SECTION
+        from hopper_ros.config.schema import validate
 
         merged = {**dict(section), **{k: v for k, v in overrides.items() if v is not None}}
         checked = validate(MOTOR_DRIVER_SECTION, merged, source)
@@ -79,8 +79,8 @@ class MotorDriverConfig:
 
 def load_motor_driver(name: str = "motor_driver.yaml") -> MotorDriverConfig:
     """The `motor_driver` section of a config file (config/ name or path), checked and typed."""
-    from hopper_ros.config_schemas import MOTOR_DRIVER
-    from hopper_ros.schema import load_config
+    from hopper_ros.config.schemas import MOTOR_DRIVER
+    from hopper_ros.config.schema import load_config
 
     section = load_config(name, MOTOR_DRIVER)["motor_driver"]
     node = {key: section[key] for key in NODE_KEYS if key in section}

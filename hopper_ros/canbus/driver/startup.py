@@ -22,7 +22,7 @@ from typing import Callable
 
 from hopper_ros.canbus import epos2_objects as eo
 from hopper_ros.canbus.epos2_objects import Command, NmtCommand, OperationMode
-from hopper_ros.canbus.master import PdoEntry, PdoMapping, SdoTransfer
+from hopper_ros.canbus.cia301.master import PdoEntry, PdoMapping, SdoTransfer
 
 from .settings import DriveConfig, DriverSettings
 

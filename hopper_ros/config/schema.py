@@ -9,7 +9,7 @@ is wrong, e.g.
 
     config/control.yaml: deadbeat.max_torque: must be > 0 N m, got -12
 
-The schemas of the package's files are in `hopper_ros/config_schemas.py`; `load_config(name,
+The schemas of the package's files are in `hopper_ros/config/schemas.py`; `load_config(name,
 schema)` reads a file (config/ name or path, `base:` variants merged) and validates it.
 """
 
@@ -212,7 +212,7 @@ def validate(schema: Section, data: Any, source: str) -> dict:
 
 def load_config(name: str | os.PathLike, schema: Section) -> dict:
     """Read a config file (config/ name or path; `base:` variants merged) and validate it."""
-    from hopper_ros.config import config_path, load_yaml
+    from hopper_ros.config.files import config_path, load_yaml
 
     path = config_path(name)                  # FileNotFoundError naming the file
     try:

@@ -19,7 +19,7 @@ _PACKAGE = "hopper_ros"
 def package_share_dir() -> Path:
     """The folder holding config/ and launch/: the repository checkout, or after `colcon build`
     the install prefix's share/hopper_ros (what `$(find-pkg-share hopper_ros)` gives)."""
-    source_tree = Path(__file__).resolve().parent.parent
+    source_tree = Path(__file__).resolve().parents[2]
     if (source_tree / "config").is_dir():
         return source_tree
     try:  # installed with colcon: share/hopper_ros

@@ -1,4 +1,4 @@
-"""One schema per configuration file (hopper_ros/schema.py: types, required keys, ranges with
+"""One schema per configuration file (hopper_ros/config/schema.py: types, required keys, ranges with
 units, unknown keys refused). No ROS import.
 
 | file | schema | read by |
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 
-from hopper_ros.schema import Anything, Flag, Items, Number, Section, Text, ordered, within
+from hopper_ros.config.schema import Anything, Flag, Items, Number, Section, Text, ordered, within
 
 PI_2 = math.pi / 2
 
@@ -397,9 +397,9 @@ def load_model(name="model.yaml"):
     """A model parameter file, validated, as ModelParams (hopper_ros.physics.params). An identified
     model's `effects:` are validated too (hopper_ros.physics.params.load_model, which returns them)
     and left out here: the controller, the predictor and the detector use the model alone."""
-    from hopper_ros.config import config_path
+    from hopper_ros.config.files import config_path
     from hopper_ros.physics.params import load_model as load_params_and_effects
-    from hopper_ros.schema import ConfigError, load_config
+    from hopper_ros.config.schema import ConfigError, load_config
 
     load_config(name, MODEL)
     try:

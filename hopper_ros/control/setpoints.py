@@ -31,7 +31,7 @@ _SEGMENT_KEYS = {"apex_height", "forward_speed", "strides", "seconds"}
 _TOP_KEYS = {"segments", "repeat"}
 
 
-from hopper_ros.schema import ConfigError  # noqa: E402 - no ROS, no heavy import
+from hopper_ros.config.schema import ConfigError  # noqa: E402 - no ROS, no heavy import
 
 
 class ScheduleError(ConfigError):
@@ -125,10 +125,10 @@ def parse_schedule(data: Any, source: str = "<schedule>") -> Schedule:
 
 def load_schedule(name: str | os.PathLike) -> Schedule:
     """Read and validate a schedule file (a path, or relative to the config directory): its schema
-    (hopper_ros.config_schemas.SCHEDULE) first, then the rules across segments."""
+    (hopper_ros.config.schemas.SCHEDULE) first, then the rules across segments."""
     from hopper_ros.config import config_path
-    from hopper_ros.config_schemas import SCHEDULE
-    from hopper_ros.schema import ConfigError, load_config
+    from hopper_ros.config.schemas import SCHEDULE
+    from hopper_ros.config.schema import ConfigError, load_config
 
     try:
         load_config(name, SCHEDULE)

@@ -51,7 +51,7 @@ DEFAULT_DISCOVERY_RANGE = "LOCALHOST"
 # The values rcl accepts (rcl/discovery_options.h); compared exactly, as rcl does.
 VALID_DISCOVERY_RANGES = ("OFF", "LOCALHOST", "SUBNET", "SYSTEM_DEFAULT")
 #: the Fast DDS profile that keeps every socket on 127.0.0.1
-LOOPBACK_PROFILE = Path(__file__).resolve().parent / "dds" / "fastdds_loopback.xml"
+LOOPBACK_PROFILE = Path(__file__).resolve().parents[1] / "dds" / "fastdds_loopback.xml"
 _RCL_RANGE_WITH_PROFILE = "SYSTEM_DEFAULT"   # rmw_fastrtps leaves the transports to the profile
 
 
