@@ -100,7 +100,8 @@ def find_drift(data: StrideData, variant: Variant, settings) -> list[Drift]:
             r = _normalised(data, pred)
             sse[form] = np.where(np.all(np.isfinite(r), axis=1), np.sum(r * r, axis=1), np.inf)
             errors[form] = Errors.of(data, pred)
-        t = paired_t(sse["constant"], sse["trend"])
+        both = np.isfinite(sse["constant"]) & np.isfinite(sse["trend"])
+        t = paired_t(sse["constant"][both], sse["trend"][both]) if both.sum() >= 4 * settings.folds else 0.0
         gain = 1.0 - errors["trend"].total / max(errors["constant"].total, 1e-12)
         if not (t >= settings.min_t and gain >= settings.min_reduction):
             continue
