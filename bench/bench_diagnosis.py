@@ -24,6 +24,10 @@ Verdicts:
   worse after an accepted effect)
 - on plant B (test/plant_b/, written blind, bench/plant_b_suite.py): diagnose_plant_b_hit_rate_pct,
   diagnose_plant_b_false_positive_pct, diagnose_plant_b_worse_count
+- on plants B and C together (plant C: test/plant_c/, written blind with 13 mechanisms outside the library's
+  families, bench/plant_c_suite.py), issue 28: diagnose_beyond_library_named_pct (effects named by mechanism,
+  magnitude within 25 %), diagnose_false_verdicts (accepted effects and drifts matching nothing concealed),
+  diagnose_clean_flagged (clean recordings with anything said)
 --quick: the timing and a few cases of each.
 """
 import subprocess
@@ -43,6 +47,7 @@ import diagnosis_sim_sweep  # noqa: E402
 from _common import child_env  # noqa: E402
 import diagnosis_suite  # noqa: E402
 import plant_b_suite  # noqa: E402
+import plant_c_suite  # noqa: E402
 
 from hopper_ros.diagnosis import diagnose_file  # noqa: E402
 from hopper_ros.diagnosis.data import prepare  # noqa: E402
@@ -55,6 +60,7 @@ from hopper_ros.recording.recordings import load_recording  # noqa: E402
 QUICK_SIM = ("clean_a", "leg_friction", "torque_gain", "quadratic_drag+torque_gain")
 QUICK_INDEPENDENT = ("clean_1", "flight_air_drag", "actuator_gain", "other_flight_lift", "pair_drag_gain")
 QUICK_PLANT_B = ("clean", "s01_quadratic_drag", "s02_boom_descent_drag")
+QUICK_PLANT_C = ("clean_a", "gear_windup", "air_chamber")
 
 
 LANE_SETS = 20        # coefficient sets of the lanes figure
@@ -140,7 +146,19 @@ def run(quick=False):
              {"name": "diagnose_plant_b_false_positive_pct", "value": round(blind["false_positive_pct"], 1),
               "unit": "%"},
              {"name": "diagnose_plant_b_worse_count", "value": len(blind["worse_after"]), "unit": "recordings"}]
-    worst = max(sim["rows"] + ind["rows"] + blind["rows"], key=lambda r: r["seconds"])
+    folder = Path(tempfile.mkdtemp())
+    subprocess.run([sys.executable, str(REPO / "test" / "plant_c" / "suite.py"), str(folder),
+                    *(QUICK_PLANT_C if quick else ())], check=True, capture_output=True)
+    third = plant_c_suite.run(folder)
+    both = blind["rows"] + third["rows"]
+    rows += [{"name": "diagnose_beyond_library_named_pct", "unit": "%",
+              "value": round(100.0 * sum(len(r["by_mechanism"]) for r in both)
+                             / max(sum(r["effects"] for r in both), 1), 1)},
+             {"name": "diagnose_false_verdicts", "unit": "verdicts",
+              "value": sum(len(r["false_verdicts"]) for r in both)},
+             {"name": "diagnose_clean_flagged", "unit": "recordings",
+              "value": sum(1 for r in both if r["clean"] and r["flagged"])}]
+    worst = max(sim["rows"] + ind["rows"] + blind["rows"] + third["rows"], key=lambda r: r["seconds"])
     print(f"bench_diagnosis: the slowest recording of the sweeps: {worst['name']} ({worst['seconds']:.0f} s)")
     rows.append({"name": "diagnose_worst_s", "value": round(worst["seconds"], 1), "unit": "s"})
     return rows

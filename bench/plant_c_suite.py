@@ -79,7 +79,8 @@ def score(result, truth: dict) -> dict:
         used.add(found[0])
         (by_mechanism if found[1] == "mechanism" else alike).append((effect["id"], found[2]))
     false = [r.name for k, r in enumerate(result.chosen) if k not in used]
-    flagged = bool(result.chosen) or result.verdict != "no significant mismatch"
+    false += [f"drift of {d.parameter}" for d in result.drifts]     # plant C has no drifting parameter
+    flagged = bool(result.chosen or result.drifts) or result.verdict != "no significant mismatch"
     return {"by_mechanism": by_mechanism, "alike": alike, "misses": misses, "false_verdicts": false,
             "effects": len(truth["effects"]), "clean": not truth["effects"], "flagged": flagged}
 

@@ -6,7 +6,8 @@ p_i = p (1 + a + b s_i), s_i the stride's time from the recording's middle over 
 change with p comes from one moved re-simulation per stride; (a, b) are fitted to the next-apex residuals
 (normalised as E_p, E_v, E_t) on the training folds and judged by re-simulating the held-out strides with their
 own p_i. A trend stands when it fits held-out strides better than the same parameter held constant (its one-sided
-t over strides at least `min_t`) and lowers the held-out E_p + E_v + E_t by `min_reduction`; it is then said with
+t over strides at least `min_t`) and lowers the held-out E_p + E_v + E_t by `drift_share` (a trend
+that removes less leaves a larger mismatch it may stand in for); it is then said with
 its size and rate and modelled (the variant's `per_stride` values).
 """
 
@@ -103,7 +104,7 @@ def find_drift(data: StrideData, variant: Variant, settings) -> list[Drift]:
         both = np.isfinite(sse["constant"]) & np.isfinite(sse["trend"])
         t = paired_t(sse["constant"][both], sse["trend"][both]) if both.sum() >= 4 * settings.folds else 0.0
         gain = 1.0 - errors["trend"].total / max(errors["constant"].total, 1e-12)
-        if not (t >= settings.min_t and gain >= settings.min_reduction):
+        if not (t >= settings.min_t and gain >= settings.drift_share):
             continue
         design = np.stack([slope[ok].ravel(), (slope[ok] * when[ok, None]).ravel()], axis=1)
         (a, b), *_ = np.linalg.lstsq(design, residual[ok].ravel(), rcond=None)

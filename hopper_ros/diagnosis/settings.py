@@ -35,6 +35,7 @@ class Settings:
     restart_threshold: float = 5.0   # ... when the accepted set leaves a residual this far over the noise level
     trajectory_threshold: float = 10.0   # nothing located by force: a re-simulated phase this many noise levels off
     floor_factor: float = 2.0        # held-out next-apex errors within this many times their noise floor: explained
+    drift_share: float = 0.5         # a main parameter's trend must remove this share of the held-out E_p+E_v+E_t
     explained_left_pct: float = 5.0  # ... or at most this share of the model's excess over the floor left [%]
     secondary_grid: int = 5          # values of an accepted entry's secondary parameter tried (geometric)
 
