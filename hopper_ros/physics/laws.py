@@ -73,6 +73,8 @@ class Coefficients:
     flight_friction_y: object = 0.0         # [m/s^2] dry friction of the boom about its vertical axis
     flight_friction_z: object = 0.0         # [m/s^2] ... about its horizontal axis
     horizontal_mass_ratio: object = 0.0     # r: horizontal effective mass m_b (1 + r) (the boom's inertia)
+    boom_friction: object = 0.0             # [m/s^2] dry friction of the boom's bearing about its vertical axis,
+    #                                         acting on the forward motion in every phase
     # touchdown
     touchdown_loss_along: object = 0.0      # share of the velocity along the leg lost at touchdown
     touchdown_loss_across: object = 0.0     # share of the velocity across the leg lost at touchdown
@@ -91,6 +93,7 @@ class Coefficients:
     torque_delay: object = 0.0              # [s] command -> torque
     torque_lag: object = 0.0                # [s] first-order time constant
     torque_limit: object = math.inf         # [N m] |tau| <= limit
+    torque_dead_band: object = 0.0          # [N m] the first delta of every command is lost
     hip_viscous: object = 0.0               # [N m s/rad] - b theta'
     hip_friction: object = 0.0              # [N m] - f tanh(theta'/w_s)
     # discovered terms (coefficients of the term libraries of physics.terms)
@@ -151,7 +154,8 @@ def active(c: Coefficients) -> frozenset:
 # the coefficients whose law is skipped where they are 0 (`is_on`); ground_friction is on where finite, and a
 # `*_terms` field where any of its coefficients is not 0
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "spring_cubic", "spring_preload",
-         "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness")
+         "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness", "boom_friction",
+         "torque_dead_band")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -176,6 +180,8 @@ def flight_acceleration(c: Coefficients, y, z, ydot, zdot):
         ay = ay - c.flight_friction_y * smooth_sign(ydot)
     if is_on(c, "flight_friction_z"):
         az = az - c.flight_friction_z * smooth_sign(zdot)
+    if is_on(c, "boom_friction"):
+        ay = ay - c.boom_friction * smooth_sign(ydot)
     if is_on(c, "flight_y_terms") or is_on(c, "flight_z_terms"):
         context = FlightContext(y, z, ydot, zdot, c.flight_z_knot)
         ay = ay + sum_terms(flight_y_term, c.flight_y_terms, context) / c.mass
@@ -274,6 +280,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
         rho_dot = rho_dot + sin * toe_rate
     force = spring_only - c.damping * rho_dot
     ydd = (-force * sin - across * cos) / (c.mass * (1.0 + c.horizontal_mass_ratio))
+    if is_on(c, "boom_friction"):      # the boom's bearing turns in stance as in flight
+        ydd = ydd - c.boom_friction * smooth_sign(ydot) / (1.0 + c.horizontal_mass_ratio)
     zdd = (force * cos - across * sin) / c.mass - c.gravity
     return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, toe_rate, ydd, zdd)
 
@@ -307,10 +315,12 @@ def toe_slip_rate(c: Coefficients, stuck_force, across, sin, cos):
 
 
 def actuator_torque(c: Coefficients, command):
-    """Torque the hip delivers for a commanded torque (before any lag): gain, offset, saturation.
+    """Torque the hip delivers for a commanded torque (before any lag): dead band, gain, offset, saturation.
 
     The delay and the first-order lag act in time (the integrators: `torque_delay`, `torque_lag`).
     """
+    if is_on(c, "torque_dead_band"):
+        command = np.sign(command) * np.maximum(np.abs(command) - c.torque_dead_band, 0.0)
     return clip(c.torque_gain * command + c.torque_offset, -c.torque_limit, c.torque_limit)
 
 
