@@ -26,6 +26,7 @@ COMMANDS = {
     "identify": "hopper_ros.cli.identify",
     "report": "hopper_ros.cli.report",
     "diagnose": "hopper_ros.cli.diagnose",
+    "import": "hopper_ros.cli.importer",
 }
 
 
