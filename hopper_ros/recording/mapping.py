@@ -414,27 +414,40 @@ def noise_level(x: np.ndarray) -> float:
     return 1.4826 * float(np.median(np.abs(d3 - np.median(d3)))) / math.sqrt(20.0)
 
 
-def resample_with_noise(t: np.ndarray, x: np.ndarray, grid: np.ndarray, sigma: float, rng) -> np.ndarray:
-    """x on `grid`: the recorded samples where the grid meets them, cubic interpolation between them plus
-    white noise that brings each new sample's noise up to the recorded ones' level `sigma`.
+HIGH_FREQUENCY_GAIN = 924.0 / 400.0   # the third-difference estimate's variance of unit high-frequency noise
 
-    Interpolation averages the neighbours' noise (a cubic midpoint keeps 64 % of its variance): new
-    samples without it would look more precise than the sensor is, and the tools, which estimate the
-    noise from the samples and judge residuals against it, would take the difference for physics."""
+
+def resample_with_noise(t: np.ndarray, x: np.ndarray, grid: np.ndarray, sigma: float, rng) -> np.ndarray:
+    """x on `grid`, more samples than recorded: cubic interpolation between the recorded samples (kept where
+    the grid meets them), plus noise near the new Nyquist frequency of the size that makes the channel's
+    noise estimate right.
+
+    A sensor sampled at f_r with noise sigma has sigma^2 f_target / f_r of 1 kHz white noise's density in the
+    band below f_r / 2, where the motion is; the tools estimate the noise level from third differences (the
+    band near the Nyquist frequency) and judge residuals against white noise of that level. Interpolated
+    samples alone would make that estimate too small by the ratio of the rates and the noise in the motion's
+    band look like physics. The added noise is the third difference of white noise: nearly all of it lies
+    above f_r / 2, so it raises the estimate to sigma^2 f_target / f_r without adding to the motion's band."""
     from scipy.interpolate import CubicSpline
 
-    spline = CubicSpline(t, x)
-    out = spline(grid)
+    def interpolate(values):
+        out = CubicSpline(t, values)(grid)
+        out[recorded] = values[nearest[recorded]]
+        return out
+
     index = np.clip(np.searchsorted(t, grid), 0, len(t) - 1)
     previous = np.clip(index - 1, 0, len(t) - 1)
     nearest = np.where(np.abs(t[index] - grid) < np.abs(t[previous] - grid), index, previous)
     recorded = np.abs(t[nearest] - grid) < 1e-3 * np.median(np.diff(t))
-    out[recorded] = x[nearest[recorded]]
-    new = ~recorded
-    if sigma > 0 and new.any():
-        unit = CubicSpline(t, np.random.default_rng(1).standard_normal(len(t)))(grid[new])   # the kept share
-        kept = float(np.mean(unit ** 2))
-        out[new] += rng.normal(0.0, sigma * math.sqrt(max(0.0, 1.0 - kept)), int(new.sum()))
+    out = interpolate(x)
+    ratio = float(np.median(np.diff(t)) / np.median(np.diff(grid)))
+    if sigma > 0 and ratio > 1.0 + RATE_TOLERANCE and len(grid) > 10:
+        unit = interpolate(np.random.default_rng(1).standard_normal(len(t)))
+        kept = noise_level(unit) ** 2                        # what the estimate sees of interpolated unit noise
+        share = max(0.0, ratio - kept) / HIGH_FREQUENCY_GAIN
+        white = rng.standard_normal(len(grid) + 3)
+        high = (white[3:] - 3 * white[2:-1] + 3 * white[1:-2] - white[:-3]) / math.sqrt(20.0)
+        out += sigma * math.sqrt(share) * high
     return out
 
 
