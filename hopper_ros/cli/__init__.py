@@ -41,6 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
         sub = subparsers.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(sub)
         sub.set_defaults(_main=module.main)
+    from hopper_ros.cli import helpformat
+
+    helpformat.apply(parser)                   # defaults in every help, sub-commands' too
     return parser
 
 
