@@ -91,7 +91,7 @@ def test_pub_once_to_a_live_echo(hopper_cli):
 def test_pub_bad_values_one_line():
     proc = subprocess.run([sys.executable, "-m", "hopper_ros.cli", "topic", "pub", "-1", "/x", "hopper_ros/msg/ApexState",
                            "{apex_heigth: 0.4}"], capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 2
+    assert proc.returncode == 3                     # bad input
     assert proc.stderr.strip().splitlines() == [
         "hopper topic pub: error: apex_heigth: ApexState has no such field (fields: header, stride_index, apex_height, "
         "forward_speed, y, leg_angle)"]

@@ -31,18 +31,10 @@ ROBOT = "robots/hopper_b/model.yaml"
 HARDWARE = "robots/hopper_b/hardware.yaml"
 CONCEALED = "quadratic_drag"
 STRIDES = 30
+REPO = Path(__file__).resolve().parent.parent
 PIVOT = 0.16          # [m] the boom's parallel_height: PointStamped's z is measured from there, in mm
 
-MAPPING = """\
-import:
-  rate: 1000
-  time: header
-  channels:
-    y:     {topic: /hopper_b/body, field: point.x, unit: mm}
-    z:     {topic: /hopper_b/body, field: point.z, unit: mm, offset: 0.16}
-    theta: {topic: /hopper_b/joint_states, field: "position[hip]", unit: rad, scale: -1}
-    tau:   {topic: /hopper_b/joint_states, field: "effort[hip]", unit: N m, scale: -1}
-"""
+MAPPING = (REPO / "config" / "robots" / "hopper_b" / "import_map.yaml").read_text()   # the shipped example
 
 
 def draws(params, seed: int):

@@ -79,7 +79,7 @@ def _info_main(args) -> int:
         print(info_json(info) if args.json else info_text(info))
     except (BagError, OSError) as exc:
         print(f"hopper bag info: error: {exc}", file=sys.stderr)
-        return 1
+        return 3                     # bad input (cli/exit_codes.py)
     return 0
 
 
@@ -90,7 +90,7 @@ def _recover_main(args) -> int:
         result = recover_bag(args.bag)
     except (BagError, OSError) as exc:
         print(f"hopper bag recover: error: {exc}", file=sys.stderr)
-        return 1
+        return 3
     if result.already_complete:
         print(f"{result.path}: complete already ({result.messages} messages), nothing to do")
     else:
@@ -112,7 +112,7 @@ def _record(args) -> int:
                         compression=args.compression)
     except (BagError, OSError) as exc:
         print(f"hopper bag record: error: {exc}", file=sys.stderr)
-        return 2
+        return 3
     stop = StopSignals().install()
     import rclpy
     from rclpy.signals import SignalHandlerOptions

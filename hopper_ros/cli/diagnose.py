@@ -42,7 +42,7 @@ def _main(args: argparse.Namespace) -> int:
         result = diagnose_file(recording, args.model, args.output, args.settings, args.json, progress)
     except (DiagnosisError, RecordingError, ValueError, FileNotFoundError, KeyError) as exc:
         print(f"hopper diagnose: error: {exc}", file=sys.stderr)
-        return 1 if isinstance(exc, ConfigError) else 2
+        return 3                     # bad input (cli/exit_codes.py)
     from hopper_ros.diagnosis.report import location_line, timing_line
 
     print(f"{len(result.data.strides)} strides, {result.wall_time:.1f} s")

@@ -95,7 +95,7 @@ def _main(args: argparse.Namespace) -> int:
                           max_strides=args.max_strides)
     except (RecordingError, BagError, ValueError, FileNotFoundError) as exc:
         print(f"hopper identify: error: {exc}", file=sys.stderr)
-        return 1 if isinstance(exc, ConfigError) else 2
+        return 3                     # bad input (cli/exit_codes.py)
     print(f"{len(result.strides)} strides from {result.recording.source} "
           f"({len(result.strides.rejected)} rejected); phases "
           f"{'labelled' if result.strides.labelled else 'detected'}")

@@ -180,7 +180,7 @@ def _echo(args: argparse.Namespace, node, stop) -> int:
         msg_type = message_class(type_name)
     except (LookupError, ValueError) as exc:
         print(f"hopper topic echo: error: {exc}", file=sys.stderr)
-        return 2
+        return 3                     # bad input (cli/exit_codes.py)
 
     truncate = None if args.full_length else args.truncate_length
     received = 0

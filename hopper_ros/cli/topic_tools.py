@@ -17,10 +17,12 @@ import math
 import sys
 import time
 
+from hopper_ros.cli.exit_codes import BAD_INPUT
+
 _POLL = 0.05          # [s]
 DEFAULT_WINDOW = 10000
 DEFAULT_RATE = 1.0    # [Hz] ros2 topic pub's
-DEFAULT_TIMEOUT = 10.0  # [s] pub's wait for a matching subscription (with -1 / -t)
+DEFAULT_TIMEOUT = 30.0  # [s] pub's wait for a matching subscription (with -1 / -t)
 _LINGER = 0.5         # [s] pub -1 / -t stays this long after the last message (reliable delivery)
 
 
@@ -97,7 +99,7 @@ def _hz(args, node, stop) -> int:
         cls = message_class(type_name)
     except (LookupError, ValueError) as exc:
         print(f"hopper topic hz: error: {exc}", file=sys.stderr)
-        return 2
+        return BAD_INPUT
     arrivals: deque = deque(maxlen=max(args.window, 2) + 1)
     node.create_subscription(cls, topic, lambda _: arrivals.append(time.monotonic()), _subscription_qos(publishers),
                              raw=True)
@@ -176,10 +178,10 @@ def _pub(args, node, stop) -> int:
         set_fields(msg, values if values is not None else {})
     except yaml.YAMLError as exc:
         print(f"hopper topic pub: error: VALUES is not YAML: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
+        return BAD_INPUT
     except (LookupError, ValueError) as exc:
         print(f"hopper topic pub: error: {exc}", file=sys.stderr)
-        return 2
+        return BAD_INPUT
     if not args.rate > 0 or (args.times is not None and args.times < 1):
         print("hopper topic pub: error: --rate must be above 0 and --times at least 1", file=sys.stderr)
         return 2
