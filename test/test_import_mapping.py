@@ -35,7 +35,7 @@ def hopping(rate: float, seconds: float = 2.0, gap_at: float | None = None):
     return t, y, z, theta, tau
 
 
-def write_bag(path, rate=500.0, reverse_at=None, joints=("boom", "hip")):
+def write_bag(path, rate=500.0, reverse_at=None, joints=("boom", "hip"), joint_delay=0.0):
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -63,9 +63,12 @@ def write_bag(path, rate=500.0, reverse_at=None, joints=("boom", "hip")):
                 covariance=cov)
             msg = Odometry(header=header, child_frame_id="body", pose=pose, twist=twist)
             writer.write(odom, int(ns), store.serialize_cdr(msg, Odometry.__msgtype__))
-            joint = JointState(header=header, name=list(joints), position=np.array([0.0, math.degrees(theta[i])]),
+            late = int(ns + joint_delay * 1e9)         # the joints sampled at other instants than the body
+            at = Header(stamp=Time(sec=late // 10**9, nanosec=late % 10**9), frame_id="odom")
+            angle = 0.3 * math.sin(2 * math.pi * 2.5 * (t[i] + joint_delay))
+            joint = JointState(header=at, name=list(joints), position=np.array([0.0, math.degrees(angle)]),
                                velocity=np.zeros(2), effort=np.array([0.0, tau[i]]))
-            writer.write(js, int(ns), store.serialize_cdr(joint, JointState.__msgtype__))
+            writer.write(js, late, store.serialize_cdr(joint, JointState.__msgtype__))
     return path
 
 
@@ -93,6 +96,16 @@ def test_odometry_and_joint_states_in_si(tmp_path, bag):
     np.testing.assert_allclose(rec.z[inside], 0.3 + 0.05 * np.abs(np.sin(2 * np.pi * 2.5 * rec.t[inside])), atol=3e-4)
     np.testing.assert_allclose(rec.theta[inside], 0.3 * np.sin(2 * np.pi * 2.5 * rec.t[inside]), atol=1e-4)
     np.testing.assert_allclose(rec.tau[inside], 2.0 * np.cos(2 * np.pi * 2.5 * rec.t[inside]), atol=2e-3)
+
+
+def test_topics_at_other_instants_are_interpolated_and_said(tmp_path):
+    bag = write_bag(tmp_path / "bag", joint_delay=0.0007)
+    imported = load_mapped(bag, mapping(tmp_path))
+    assert "theta, tau: /joints sampled at other instants than z's /odom: interpolated linearly onto them" in imported.notes
+    assert "1 of z's samples outside the other topics' times left out" in imported.notes
+    rec = imported.recording                        # its time starts at z's first sample kept: 2 ms in
+    inside = rec.t < 0.99
+    np.testing.assert_allclose(rec.theta[inside], 0.3 * np.sin(2 * np.pi * 2.5 * (rec.t[inside] + 0.002)), atol=2e-4)
 
 
 def test_decoder_agrees_with_rosbags(bag):

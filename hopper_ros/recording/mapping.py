@@ -399,10 +399,13 @@ def load_mapped(source: str | os.PathLike, mapping: ImportMapping | str | os.Pat
     return _assemble(mapping, series, str(source))
 
 
-def _runs(t: np.ndarray, period: float) -> list[slice]:
+def _runs(t: np.ndarray, period: float) -> tuple[list[slice], int]:
+    """Runs of samples between gaps (more than 3 samples each), and how many samples shorter runs held."""
     breaks = np.flatnonzero(np.diff(t) > GAP_FACTOR * period) + 1
     edges = [0, *breaks.tolist(), len(t)]
-    return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b - a > 3]
+    runs = [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]
+    kept = [r for r in runs if r.stop - r.start > 3]
+    return kept, sum(r.stop - r.start for r in runs if r.stop - r.start <= 3)
 
 
 def noise_level(x: np.ndarray) -> float:
@@ -461,28 +464,31 @@ def _assemble(mapping: ImportMapping, series: dict, source: str) -> Imported:
         raise RecordingError(f"{where}: samples {period:.6g} s apart ({rate:.4g} Hz) after the conversion to s; "
                              f"a recording is sampled at {RATE_LIMITS[0]:g} Hz to {RATE_LIMITS[1] / 1000:g} kHz: "
                              "check the time unit")
-    # channels of other topics (other instants) onto z's times
+    # channels of other topics (other instants) onto z's times, where every topic has samples
+    first = max(t[0] for t, _ in series.values())
+    last = min(t[-1] for t, _ in series.values())
+    inside = (base_t >= first) & (base_t <= last)
+    if inside.sum() < 2:
+        raise RecordingError(f"{source}: the topics' samples do not overlap in time")
+    if not inside.all():
+        notes.append(f"{int((~inside).sum())} of z's samples outside the other topics' times left out")
+    base_t = base_t[inside]
     values = {}
+    interpolated = {}
     for name, (t, v) in series.items():
-        if t is base_t or (len(t) == len(base_t) and np.allclose(t, base_t, rtol=0, atol=period * 1e-3)):
-            values[name] = v
+        if len(t) == len(series["z"][0]) and np.allclose(t, series["z"][0], rtol=0, atol=period * 1e-3):
+            values[name] = v[inside]
             continue
-        other = float(np.median(np.diff(t)))
-        if other > 1.5 * period:
-            notes.append(f"{name}: {mapping.channels[name].topic} at {1 / other:.0f} Hz, interpolated linearly onto "
-                         f"z's {rate:.0f} Hz")
-        inside = (base_t >= t[0]) & (base_t <= t[-1])
         values[name] = np.interp(base_t, t, v)
-        if not inside.all():
-            keep = np.flatnonzero(inside)
-            if keep.size < 2:
-                raise RecordingError(f"{source}: {name}'s samples ({t[0]:.3f}-{t[-1]:.3f} s) do not overlap z's")
-            base_t = base_t[keep[0]:keep[-1] + 1]
-            values = {k: x[keep[0]:keep[-1] + 1] if len(x) != len(base_t) else x for k, x in values.items()}
-    for name in values:
-        if len(values[name]) != len(base_t):
-            values[name] = np.interp(base_t, series[name][0], series[name][1])
-    runs = _runs(base_t, period)
+        interpolated.setdefault(mapping.channels[name].topic, []).append(name)
+    for topic, names in interpolated.items():
+        notes.append(f"{', '.join(names)}: {topic} sampled at other instants than z's {mapping.channels['z'].topic}: "
+                     "interpolated linearly onto them")
+    runs, dropped = _runs(base_t, period)
+    if not runs:
+        raise RecordingError(f"{source}: no run of more than 3 samples between gaps")
+    if dropped:
+        notes.append(f"{dropped} sample(s) in runs of 3 or fewer between gaps left out")
     gaps = len(runs) - 1
     if gaps:
         lengths = [base_t[b.start] - base_t[a.stop - 1] for a, b in zip(runs[:-1], runs[1:])]
