@@ -191,3 +191,22 @@ def test_identify_then_diagnose_on_the_other_robot(clean_robot_b, tmp_path):
     proc = hopper("diagnose", bag, "--map", mapping, "--model", tmp_path / "id" / "identified_model.yaml", "-q")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "no significant mismatch" in proc.stdout.splitlines(), proc.stdout
+
+
+def test_the_other_robots_files_are_valid_and_agree():
+    """hopper_b's model file and boom pass their schemas; its gravity is (4.7) for its boom; its boom reaches
+    every height the robot hops at, with a finer resolution than the thesis's (a longer boom, same encoders)."""
+    from hopper_ros.config_schemas import load_model
+    from hopper_ros.hardware.encoders import BoomKinematics
+    from hopper_ros.physics.boom import boom_effective_gravity
+
+    model = load_model(ROBOT)
+    thesis = load_params()
+    assert all(getattr(model, n) != getattr(thesis, n) for n in ("body_mass", "toe_mass", "stiffness", "rest_length"))
+    assert model.gravity == pytest.approx(boom_effective_gravity(model.body_mass + model.toe_mass, 2.0), abs=0.01)
+    boom = BoomKinematics.from_config(load_hardware(HARDWARE))
+    assert boom.boom_length != BoomKinematics.from_config(load_hardware()).boom_length
+    for z in (0.15, 0.25, 0.5):
+        y_step, z_step = boom.position_resolution(z)
+        assert 0 < z_step < 3e-4 and 0 < y_step < 3e-4
+        boom.counts(1.0, z, 0.3)                                  # within the boom's reach
