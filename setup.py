@@ -17,6 +17,20 @@ def _version():
     return re.search(r"<version>\s*([^<\s]+)\s*</version>", text).group(1)
 
 
+def _runtime_pins():
+    """The direct runtime dependencies pinned in requirements/python.txt (its `--- direct` section, the
+    build backend setuptools aside): what `pip install .` installs. ROS 2 itself (rclpy, the message
+    packages) comes from the ROS install or requirements/ros.txt, not from here."""
+    pins, direct = [], False
+    for line in (HERE / "requirements" / "python.txt").read_text(encoding="utf-8").splitlines():
+        text = line.split("#", 1)[0].strip()
+        if line.startswith("# ---"):
+            direct = "direct" in line
+        elif direct and text and not text.lower().startswith("setuptools"):
+            pins.append(text)
+    return pins
+
+
 def _nodes():
     """NODES of hopper_ros/nodes/registry.py, read without importing the package."""
     path = HERE / "hopper_ros" / "nodes" / "registry.py"
@@ -32,8 +46,7 @@ setup(
     license="MIT",
     python_requires=">=3.10",
     packages=find_packages(include=["hopper_ros", "hopper_ros.*"]),
-    # Python dependencies are pinned in requirements/*.txt and installed by make setup.
-    install_requires=[],
+    install_requires=_runtime_pins(),
     entry_points={
         "console_scripts": ["hopper = hopper_ros.cli:main"]
         + [f"{name} = {target}" for name, target in sorted(_nodes().items())],

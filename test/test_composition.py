@@ -115,7 +115,7 @@ def test_hopper_launch_says_what_is_wrong_with_a_container_in_one_line(hopper_cl
     path = tmp_path / "bad.launch.yaml"
     path.write_text(yaml.safe_dump({"launch": [container(BRIDGE, pkg="rclcpp_components")]}))
     process = hopper_cli("launch", str(path))
-    assert process.wait() == 2
+    assert process.wait() == 3
     assert process.stderr.strip().count("\n") == 0
     assert f"hopper launch: error: {path}: entry 1 (node_container): pkg 'rclcpp_components'" in process.stderr
 

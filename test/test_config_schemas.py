@@ -234,7 +234,7 @@ def test_a_table_of_bad_config_files_across_every_node_and_tool(tmp_path):
     for (consumer, path, value, words), bad, result in results:
         lines = [line for line in result.stderr.splitlines() if line.strip()]
         key = NAMED_KEY.get(f"{path}@{value}", NAMED_KEY.get(path, path))
-        ok = (result.returncode == 1 and len(lines) == 1 and "Traceback" not in result.stderr
+        ok = (result.returncode == 3 and len(lines) == 1 and "Traceback" not in result.stderr
               and str(bad) in lines[0] and f"{key}" in lines[0] and words in lines[0])
         if not ok:
             failures.append(f"{consumer} {path}={value!r}: exit {result.returncode}, stderr {result.stderr[-600:]!r}")

@@ -133,11 +133,26 @@ def test_package_xml_lists_what_the_code_imports():
 def test_readme_robot_install_line_installs_the_runtime_libraries_without_keys():
     readme = (REPO / "README.md").read_text()
     [line] = [line for line in readme.splitlines() if line.startswith("pip install ")]
-    packages = line.split("#", 1)[0].split()[2:]
+    words = line.split("#", 1)[0].split()[2:]
+    packages = [w for w in words if not w.startswith("-")]                     # --user --break-system-packages (PEP 668)
     used = set(runtime_modules().values())
-    assert {normalise(p) for p in packages} == {"filterpy", "mcap"}          # mcap brings lz4 and zstandard
+    assert {normalise(p.split("==")[0]) for p in packages} == {"filterpy", "mcap"}   # mcap brings lz4 and zstandard
+    pinned = pins("python.txt")["direct"]
+    for p in packages:                                                         # the versions of requirements/python.txt
+        name, _, version = p.partition("==")
+        assert version == pinned[normalise(name)], p
     assert {"lz4", "zstandard"} <= set(normalise(r.split(";")[0].split()[0].split(">")[0].split("=")[0].split("<")[0])
                                        for r in importlib.metadata.requires("mcap"))
     assert PIP_ONLY <= used
     for tool in pins("test.txt")["direct"]:
         assert tool not in line, f"the robot install line installs the test tool {tool}"
+
+
+def test_setup_install_requires_is_the_runtime_pins():
+    """`pip install .` installs what the package imports at the versions make setup pins (issue 31)."""
+    namespace = {"__file__": str(REPO / "setup.py")}
+    exec((REPO / "setup.py").read_text().split("\nsetup(\n")[0], namespace)
+    required = {normalise(r.split("==")[0]): r.split("==")[1] for r in namespace["_runtime_pins"]()}
+    expected = {name: version for name, version in pins("python.txt")["direct"].items() if name != "setuptools"}
+    assert required == expected
+    assert set(runtime_modules().values()) - {"rclpy"} <= set(required) | set(pins("ros.txt")["direct"])

@@ -229,4 +229,4 @@ def test_identify_and_report_commands(noisy_collection, hopper_cli, tmp_path):
     for png in ("identification_stride.png", "identification_errors.png", "grf_footfalls.png"):
         assert (tmp_path / "report" / png).stat().st_size > 10_000
     refused = hopper_cli("identify", str(tmp_path / "missing.csv"))
-    assert refused.wait() == 2 and "no such file" in refused.stderr
+    assert refused.wait() == 3 and "no such file" in refused.stderr

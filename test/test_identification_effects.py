@@ -191,4 +191,4 @@ def test_identify_with_effects_writes_a_model_file_load_model_reads(hopper_cli, 
     assert load_params(out / "identified_model.yaml") == params
     assert "laws with effects (lanes)" in (out / "report.md").read_text()
     refused = hopper_cli("identify", str(csv_path), "--effects", "leg_stiffness")
-    assert refused.wait(60) == 2 and "leg_stiffness sets stiffness" in refused.stderr
+    assert refused.wait(60) == 3 and "leg_stiffness sets stiffness" in refused.stderr

@@ -165,7 +165,7 @@ def test_bad_command_lines_get_one_line(hopper_cli, tmp_path):
         (["hopper_ros", "example.launch.yaml", "namespace"], "expected [PACKAGE] FILE, got hopper_ros example.launch.yaml namespace"),
     ]:
         process = hopper_cli("launch", *words)
-        assert process.wait() == 2
+        assert process.wait() == 3
         assert process.stderr.startswith("hopper launch: error: ") and message in process.stderr, process.stderr
         assert len(process.stderr.splitlines()) == 1 and "Traceback" not in process.stderr
 

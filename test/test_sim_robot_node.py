@@ -111,10 +111,10 @@ def test_lockstep_ends_after_its_duration_with_every_period_sent(hopper_cli):
 
 def test_bad_parameters_stop_the_node_with_a_clear_error(hopper_cli):
     node = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=none", "-p", "udp_host:=192.0.2.1")
-    assert node.wait() == 1
+    assert node.wait() == 3                         # bad input
     assert "only sends on loopback" in node.stderr
     node = hopper_cli("run", "sim_robot", "--ros-args", "-p", "can:=none", "-p", "enable_effects:=[levitation]")
-    assert node.wait() == 1
+    assert node.wait() == 3
     assert "unknown effect 'levitation'" in node.stderr
 
 

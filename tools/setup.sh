@@ -125,6 +125,11 @@ else
       exit 1
     fi
   }
+  # The prerequisites of the message build (README.md, "Prerequisites"), said before anything runs.
+  command -v cmake > /dev/null || { echo "setup: cmake is missing (the messages of msg/ are built with it):" \
+    "install cmake 3.20 or later, e.g. apt install cmake" >&2; exit 1; }
+  command -v c++ > /dev/null || command -v g++ > /dev/null || command -v clang++ > /dev/null || {
+    echo "setup: no C++ compiler (c++, g++ or clang++) for the messages of msg/: e.g. apt install g++" >&2; exit 1; }
   # Only the venv is the ROS prefix; a sourced ROS install must not leak into this build.
   (
     unset PYTHONPATH

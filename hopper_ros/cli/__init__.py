@@ -26,6 +26,7 @@ COMMANDS = {
     "identify": "hopper_ros.cli.identify",
     "report": "hopper_ros.cli.report",
     "diagnose": "hopper_ros.cli.diagnose",
+    "import": "hopper_ros.cli.importer",
 }
 
 
@@ -40,6 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
         sub = subparsers.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(sub)
         sub.set_defaults(_main=module.main)
+    from hopper_ros.cli import helpformat
+
+    helpformat.apply(parser)                   # defaults in every help, sub-commands' too
     return parser
 
 

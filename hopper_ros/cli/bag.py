@@ -44,10 +44,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     record.set_defaults(_verb=_record)
     info = verbs.add_parser("info", help="topics, counts, duration and state of a bag (also an unfinished one)")
     info.add_argument("bag", help="bag folder or .mcap file")
+    info.add_argument("--json", action="store_true", help="print the summary as JSON (times in ns and ISO 8601, UTC)")
     info.set_defaults(_verb=_info)
     recover = verbs.add_parser("recover", help="complete a bag whose recorder was killed (keeps the original file)")
     recover.add_argument("bag", help="bag folder")
     recover.set_defaults(_verb=_recover)
+    from hopper_ros.cli import bag_play
+
+    bag_play.add_arguments(verbs)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -68,12 +72,14 @@ def _recover(args) -> int:
 
 def _info_main(args) -> int:
     from hopper_ros.recording.bag import BagError, bag_info
+    from hopper_ros.recording.bag_report import info_json, info_text
 
     try:
-        print(bag_info(args.bag).format())
+        info = bag_info(args.bag)
+        print(info_json(info) if args.json else info_text(info))
     except (BagError, OSError) as exc:
         print(f"hopper bag info: error: {exc}", file=sys.stderr)
-        return 1
+        return 3                     # bad input (cli/exit_codes.py)
     return 0
 
 
@@ -84,7 +90,7 @@ def _recover_main(args) -> int:
         result = recover_bag(args.bag)
     except (BagError, OSError) as exc:
         print(f"hopper bag recover: error: {exc}", file=sys.stderr)
-        return 1
+        return 3
     if result.already_complete:
         print(f"{result.path}: complete already ({result.messages} messages), nothing to do")
     else:
@@ -106,7 +112,7 @@ def _record(args) -> int:
                         compression=args.compression)
     except (BagError, OSError) as exc:
         print(f"hopper bag record: error: {exc}", file=sys.stderr)
-        return 2
+        return 3
     stop = StopSignals().install()
     import rclpy
     from rclpy.signals import SignalHandlerOptions

@@ -76,7 +76,7 @@ def main(args: argparse.Namespace) -> int:
         hardware = load_hardware(args.hardware)
     except (ValueError, FileNotFoundError) as exc:
         print(f"hopper collect: error: {exc}", file=sys.stderr)
-        return 1 if isinstance(exc, ConfigError) else 2
+        return 3                     # bad input (cli/exit_codes.py)
     total = args.experiments if args.experiments is not None else args.strides
     bar = ProgressBar(total, "collect")
 
@@ -91,7 +91,7 @@ def main(args: argparse.Namespace) -> int:
                          progress=progress)
     except (BagError, ValueError, OSError) as exc:
         print(f"hopper collect: error: {exc}", file=sys.stderr)
-        return 2
+        return 3                     # bad input (cli/exit_codes.py)
     bar.close()
     discarded = ", ".join(f"{count} {reason}" for reason, count in sorted(result.discarded.items())) or "none"
     print(f"kept {len(result.kept)} of {result.experiments} experiments (discarded: {discarded})")

@@ -78,7 +78,7 @@ def main(args: argparse.Namespace) -> int:
         launch_file = launch_file_path(launch)
     except FileNotFoundError as exc:
         print(f"demo: error: {exc}", file=sys.stderr)
-        return 2
+        return 3
     if launch == DEFAULT_LAUNCH:
         # the monitor too, below the loop's nodes: with normal scheduling it was starved for strides
         apply_realtime_priority({REALTIME_PRIORITY_VAR: str(MONITOR_PRIORITY)})

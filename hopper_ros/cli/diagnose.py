@@ -10,6 +10,8 @@ HELP = "locate, name and model what the model misses in a recording (bag or t,y,
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", help="bag folder, .mcap or CSV of 1 kHz samples t,y,z,theta,tau[,phase]")
+    parser.add_argument("--map", metavar="FILE", help="read another robot's bag or CSV through this mapping file "
+                        "(hopper import; docs/bring_your_own_robot.md)")
     parser.add_argument("--model", default="model.yaml", help="model parameters (config/ name or path)")
     parser.add_argument("--settings", default="diagnosis.yaml", help="candidates and statistics (config/ name or path)")
     parser.add_argument("-o", "--output", default=None, metavar="DIR", help="write diagnosis.md and diagnosis.png here")
@@ -21,10 +23,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     from hopper_ros.cli.errors import run_tool
 
-    return run_tool("diagnose", [args.recording, args.model, args.settings], lambda: _main(args))
+    return run_tool("diagnose", [args.recording, args.model, args.settings, args.map], lambda: _main(args))
 
 
 def _main(args: argparse.Namespace) -> int:
+    from hopper_ros.cli.importer import load_for_tool
     from hopper_ros.diagnosis import DiagnosisError, diagnose_file
     from hopper_ros.diagnosis.progress import Progress
     from hopper_ros.recording.recordings import RecordingError
@@ -34,11 +37,12 @@ def _main(args: argparse.Namespace) -> int:
 
     try:
         load_model(args.model)                          # its schema first: one line naming file and key
+        recording = load_for_tool(args.recording, args.map, "diagnose")
         progress = Progress(enabled=False if args.quiet else None)
-        result = diagnose_file(args.recording, args.model, args.output, args.settings, args.json, progress)
+        result = diagnose_file(recording, args.model, args.output, args.settings, args.json, progress)
     except (DiagnosisError, RecordingError, ValueError, FileNotFoundError, KeyError) as exc:
         print(f"hopper diagnose: error: {exc}", file=sys.stderr)
-        return 1 if isinstance(exc, ConfigError) else 2
+        return 3                     # bad input (cli/exit_codes.py)
     from hopper_ros.diagnosis.report import location_line, timing_line
 
     print(f"{len(result.data.strides)} strides, {result.wall_time:.1f} s")

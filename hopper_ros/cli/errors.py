@@ -1,7 +1,7 @@
 """One line, never a traceback, for the offline tools' bad input (issue 17).
 
 `run_tool(tool, inputs, func)` runs a command's work and turns whatever it raises into one line
-on stderr, `hopper TOOL: error: FILE: what is wrong`, and exit status 2: the errors of the
+on stderr, `hopper TOOL: error: FILE: what is wrong`, and exit status 3 (BAD_INPUT, cli/exit_codes.py): the errors of the
 loaders (RecordingError, BagError, ValueError, OSError: they name the file already; the input is
 prefixed when they do not), running out of memory, and any other exception, with its type
 (a defect rather than bad input: `HOPPER_DEBUG=1` shows its traceback). Ctrl-C is left alone.
@@ -14,7 +14,7 @@ import sys
 import traceback
 from typing import Callable, Sequence
 
-INPUT_ERROR = 2
+from hopper_ros.cli.exit_codes import BAD_INPUT as INPUT_ERROR  # noqa: E402 - the table of every tool
 _MAX_MESSAGE = 400
 
 

@@ -24,6 +24,10 @@ HELP = "identify the model parameters from a recording (Nelder-Mead on (4.4), k-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", help="bag folder, .mcap file or CSV (t,y,z,theta,tau[,phase])")
+    parser.add_argument("--map", metavar="FILE", help="read another robot's bag or CSV through this mapping file "
+                        "(hopper import; docs/bring_your_own_robot.md)")
+    parser.add_argument("--model", metavar="FILE", help="the robot's model file: the parameters not fitted (body_mass "
+                        "weighed, rest_length measured) are held at its values (default: the config's initial values)")
     parser.add_argument("-p", "--predictor", action="append", choices=("aas", "corrected", "exact", "lanes"),
                         help="predictor to identify with; repeat for several (default: config's, the AAS; "
                         "lanes with --effects)")
@@ -36,13 +40,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default="identification.yaml", help="settings (config/ name or path)")
     parser.add_argument("--max-strides", type=int, metavar="N", help="use only the first N strides")
     parser.add_argument("-o", "--output", metavar="DIR", help="write a report and the identified model file here")
+    parser.add_argument("--json", metavar="FILE", help="write the identified parameters, errors and identifiability as JSON")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
 
 def main(args: argparse.Namespace) -> int:
     from hopper_ros.cli.errors import run_tool
 
-    return run_tool("identify", [args.recording, args.config], lambda: _main(args))
+    return run_tool("identify", [args.recording, args.config, args.map, args.model], lambda: _main(args))
+
+
+def held_from_model(settings, model: str, fitted):
+    """The settings' initial parameters with those not fitted taken from the robot's model file."""
+    from hopper_ros.config.schemas import load_model
+
+    robot = load_model(model)                       # its schema first: one line naming the file and the key
+    return settings.initial.replace(**{name: getattr(robot, name) for name in robot.as_dict() if name not in fitted})
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -62,6 +75,8 @@ def _main(args: argparse.Namespace) -> int:
             changes["seed"] = args.seed
         if args.fit:
             changes["fitted"] = tuple(name.strip() for name in args.fit.split(",") if name.strip())
+        if args.model:
+            changes["initial"] = held_from_model(settings, args.model, changes.get("fitted", settings.fitted))
         if args.effects is not None:
             changes["effects"] = tuple(name.strip() for name in args.effects.split(",") if name.strip())
         if changes:
@@ -73,11 +88,14 @@ def _main(args: argparse.Namespace) -> int:
             others = ", ".join(m for m in methods if m != "lanes")
             print(f"effects {', '.join(settings.effects)} are fitted by the lanes predictor; {others} ran without them",
                   file=sys.stderr)
-        result = identify(args.recording, settings, methods, show_progress=not args.no_progress,
+        from hopper_ros.cli.importer import load_for_tool
+
+        recording = load_for_tool(args.recording, args.map, "identify")
+        result = identify(recording, settings, methods, show_progress=not args.no_progress,
                           max_strides=args.max_strides)
     except (RecordingError, BagError, ValueError, FileNotFoundError) as exc:
         print(f"hopper identify: error: {exc}", file=sys.stderr)
-        return 1 if isinstance(exc, ConfigError) else 2
+        return 3                     # bad input (cli/exit_codes.py)
     print(f"{len(result.strides)} strides from {result.recording.source} "
           f"({len(result.strides.rejected)} rejected); phases "
           f"{'labelled' if result.strides.labelled else 'detected'}")
@@ -97,6 +115,7 @@ def _main(args: argparse.Namespace) -> int:
           + ", ".join(f"{n} {s:.3g} % ({ident.verdict(n)})" for n, s in zip(ident.names, ident.relative_std_pct)))
     print("body_mass: not identifiable from strides without torque (only k/m_b, d/m_b, m_t/m_b, tau/m_b enter); "
           "held at its weighed value unless --fit names it")
+    model = None
     if args.output:
         from hopper_ros.physics.params import save_params
         from hopper_ros.reports.identification import write_report
@@ -111,4 +130,8 @@ def _main(args: argparse.Namespace) -> int:
                                        "physics.params.load_model)" if effects else ""),
                             effects=effects)
         print(f"\nreport {path}\nmodel {model}")
+    if args.json:
+        from hopper_ros.identification.summary import write_json
+
+        print(f"json {write_json(result, args.json, model)}")
     return 0

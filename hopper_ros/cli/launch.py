@@ -51,7 +51,7 @@ def main(args: argparse.Namespace) -> int:
         description = load_launch(file, arguments, package)
     except (LaunchFileError, FileNotFoundError, ValueError) as exc:
         print(f"hopper launch: error: {exc}", file=sys.stderr)
-        return 2
+        return 3                     # bad input (cli/exit_codes.py)
     if args.show_args:
         for name, value in description.arguments.items():
             print(f"{name}:={value}")

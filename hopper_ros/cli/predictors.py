@@ -25,7 +25,7 @@ def main(args) -> int:
         params = load_model(args.model)
     except (ConfigError, FileNotFoundError) as exc:
         print(f"hopper predictors: error: {exc}", file=sys.stderr)
-        return 1
+        return 3                     # bad input (cli/exit_codes.py)
     path = write_predictor_report(args.output, params, args.strides, args.seed)
     print(f"report written to {path}")
     return 0

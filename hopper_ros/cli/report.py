@@ -82,7 +82,7 @@ def _main(args: argparse.Namespace) -> int:
             forces = simulate_profiles(grf_folder, sim_config, hardware, settings.grf, sim_config.model_params())
     except (RecordingError, BagError, ValueError, FileNotFoundError) as exc:
         print(f"hopper report: error: {exc}", file=sys.stderr)
-        return 1 if isinstance(exc, ConfigError) else 2
+        return 3                     # bad input (cli/exit_codes.py)
     path = write_report(out, result, forces, collection)
     print(f"report written to {path}")
     return 0

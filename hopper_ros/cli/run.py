@@ -11,13 +11,35 @@ HELP = "run a registered node in this process (like `ros2 run hopper_ros NODE`)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("node", help="registered node name (see hopper_ros/nodes/registry.py)")
+    parser.epilog = node_list() + "\n\nevery node is also a console script of its own name (e.g. .venv/bin/sim_robot)"
+    parser.add_argument("node", help="registered node name (listed below; hopper_ros/nodes/registry.py)")
     parser.add_argument(
         "node_args",
         nargs=argparse.REMAINDER,
         metavar="ARGS",
         help="arguments for the node, e.g. --ros-args -r __node:=name -p param:=value",
     )
+
+
+def node_list() -> str:
+    """The registered nodes with the first line of each module's docstring (read without importing it)."""
+    import ast
+    import importlib.util
+
+    from hopper_ros.nodes.registry import NODES
+
+    lines = ["nodes:"]
+    width = max(map(len, NODES))
+    for name, target in NODES.items():
+        spec = importlib.util.find_spec(target.partition(":")[0])
+        doc = ""
+        if spec is not None and spec.origin:
+            with open(spec.origin, encoding="utf-8") as handle:
+                doc = (ast.get_docstring(ast.parse(handle.read())) or "").strip().splitlines()[0:1]
+            doc = doc[0] if doc else ""
+            doc = doc[len(name) + 2:] if doc.startswith(f"{name}: ") else doc
+        lines.append(f"  {name:<{width}}  {doc}")
+    return "\n".join(lines)
 
 
 def resolve_entry_point(node: str):

@@ -22,7 +22,7 @@ import time
 
 from hopper_ros.runtime.messages import DEFAULT_TRUNCATE_LENGTH, message_class, message_to_yaml
 
-HELP = "list topics, or print the messages of one as YAML (like `ros2 topic`)"
+HELP = "list topics, print a topic's messages as YAML or its rate, publish one (like `ros2 topic`)"
 
 _ECHO_DESCRIPTION = """Print the messages of TOPIC as YAML, each followed by '---'.
 
@@ -77,6 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     echo.add_argument("-f", "--full-length", action="store_true", help="never truncate")
     echo.set_defaults(_verb=_echo)
+    from hopper_ros.cli import topic_tools
+
+    topic_tools.add_arguments(verbs)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -177,7 +180,7 @@ def _echo(args: argparse.Namespace, node, stop) -> int:
         msg_type = message_class(type_name)
     except (LookupError, ValueError) as exc:
         print(f"hopper topic echo: error: {exc}", file=sys.stderr)
-        return 2
+        return 3                     # bad input (cli/exit_codes.py)
 
     truncate = None if args.full_length else args.truncate_length
     received = 0

@@ -17,8 +17,8 @@ fraction of the CPU per message: measured on the demo graph at 1 kHz, 150 % of a
 instead of 190 %, the event detector and the controller at 13 % instead of 30 %. It has no guard
 conditions, so a stop signal is seen within `_EVENTS_SPIN_PERIOD`. SIGINT and SIGTERM both end the spin (unless the parent process had
 set them to be ignored), and so does a node setting its attribute `finished` (its work is done;
-seen at the next wake-up of the executor; with `failed` set too, the status is 1); the node is destroyed, rclpy shut down and 0 returned. A node that cannot start (bad configuration) or whose callback raises makes
-it return 1.
+seen at the next wake-up of the executor; with `failed` set too, the status is 1); the node is destroyed, rclpy shut down and 0 returned. A node that cannot start (bad configuration) makes it return 3, one whose callback raises
+1 (cli/exit_codes.py).
 """
 
 from __future__ import annotations
@@ -197,6 +197,7 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
         if stop.received is None:  # otherwise: the shutdown interrupted start-up, not an error
             status = 1
             if isinstance(exc, (ValueError, OSError)) and node is None:
+                status = 3                                # bad input (cli/exit_codes.py)
                 print(f"error: {exc}", file=sys.stderr)  # configuration: the message says it all
             else:
                 traceback.print_exc()
