@@ -163,6 +163,10 @@ JUMP_TERMS = TermLibrary((
     ("v_along", "a share of the velocity along the leg", "1"),
     ("v_across", "a share of the velocity across the leg", "1"),
 ), jump_term)
+# terms that are products of two of the model's variables (issue 28, point 3): no library entry's law has one, so a
+# discovered set using one is never the same law as an entry written as terms (diagnosis.acceptance)
+PRODUCT_TERMS = ("x rho'", "tau|theta'|")
+
 TERM_LIBRARIES = {"flight_y": FLIGHT_Y_TERMS, "flight_z": FLIGHT_Z_TERMS, "leg": LEG_TERMS, "hip": HIP_TERMS,
                   "touchdown_along": JUMP_TERMS, "touchdown_across": JUMP_TERMS,
                   "liftoff_along": JUMP_TERMS, "liftoff_across": JUMP_TERMS}
