@@ -217,6 +217,11 @@ LIBRARY: tuple[Effect, ...] = (
        Parameter("delta", "N m", 0.0, 1.5, "torque_dead_band"),
        "tau = sign(tau_cmd) max(|tau_cmd| - delta, 0)", "the drive loses the first delta of every command (a "
        "dead band: small commands give no torque)", TORQUES),
+    _e("hip_inertia", "actuator", "stance_hip", "hip",
+       Parameter("J", "kg m^2", 0.0, 0.03, "hip_inertia"),
+       "tau_body = (tau + J (2 rho' theta' - g sin theta)/rho) / (1 + J/(m rho^2)); v_across+ = v_across- / "
+       "(1 + J/(m rho_0^2))", "the leg and the motor's rotor through the gear have inertia about the hip: part of the "
+       "hip torque turns them in stance, and the still leg is spun up at touchdown", SPEEDS),
     _e("hip_viscous_friction", "actuator", "stance_hip", "hip",
        Parameter("b", "N m s/rad", 0.0, 0.3, "hip_viscous"),
        "tau += -b theta'", "viscous friction in the hip joint", SPEEDS),
