@@ -94,7 +94,7 @@ def _ramp_from_stance_start(strides, lead: float) -> None:
     strides.ramp_duration = new_ramp
 
 
-@dataclass
+@dataclass(repr=False)
 class StrideData:
     rec: Recording
     strides: object
@@ -113,6 +113,9 @@ class StrideData:
     # dataclasses.replace: a subset of the strides has its own
     simulated: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     located: dict = field(default_factory=dict, init=False, repr=False, compare=False)   # ... (locate.locate)
+
+    def __repr__(self) -> str:
+        return f"StrideData({self.rec.source}, {len(self.strides)} strides)"
 
     @property
     def liftoffs(self) -> np.ndarray:

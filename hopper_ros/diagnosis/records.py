@@ -105,7 +105,7 @@ class Scored:
         self.magnitude = self.candidate.physical(value)
 
 
-@dataclass
+@dataclass(repr=False)
 class Diagnosis:
     """What `diagnose` found: the accepted effects, the rounds that chose them, the locations, the held-out
     errors before and after, the per-phase residuals, and the `verdict` line."""
@@ -131,6 +131,9 @@ class Diagnosis:
     report: object = None            # path of diagnosis.md when written
     json: object = None              # path of the JSON when written
 
+    def __repr__(self) -> str:       # the arrays it holds are large: a failing test prints this
+        return f"Diagnosis({len(self.data.strides)} strides: {self.verdict!r})"
+
 
 @dataclass(frozen=True)
 class Reference:
@@ -153,9 +156,15 @@ class Completeness:
     explained: bool                  # nothing located, and every error within floor_factor x its floor or at
     #                                  most explained_left_pct of the model's excess left
     site: str                        # where the residual left stands out ("" when nowhere)
+    path_only: bool = False          # the model's own next apexes are within floor_factor x the floor: what is
+    #                                  found changes the path between apexes, not the next apex
 
     def words(self) -> str:
         ratios = "/".join(f"{self.over_floor[k]:.1f}" for k in APEX_ERRORS)
+        if self.path_only:
+            return (("explained" if self.explained else f"partly explained, at {self.site}")
+                    + "; it changes the path between apexes, not the next apex (the model's held-out next apexes "
+                    "are at the noise floor)")
         if self.explained:
             return (f"explained (held-out E_p/E_v/E_t at {ratios} x the noise floor, {self.left_pct:.0f} % of the "
                     "model's excess over it left)")
@@ -164,6 +173,7 @@ class Completeness:
 
     def as_dict(self) -> dict:
         return {"explained": self.explained, "residual_left_pct": self.left_pct, "at": self.site,
+                "path_only": self.path_only,
                 "noise_floor": self.floor.as_dict(), "over_noise_floor": dict(self.over_floor)}
 
 
@@ -175,4 +185,5 @@ def completeness(before: Errors, after: Errors, floor: Errors, left: list, setti
     share = 100.0 * min(max(after.total - floor.total, 0.0) / excess, 1.0) if math.isfinite(after.total) else 100.0
     explained = not above and (all(r <= settings.floor_factor for r in over.values())
                                or share <= settings.explained_left_pct)
-    return Completeness(floor, over, share, explained, above[0].words() if above else "")
+    path_only = all(getattr(before, k) <= settings.floor_factor * getattr(floor, k) for k in APEX_ERRORS)
+    return Completeness(floor, over, share, explained, above[0].words() if above else "", path_only)

@@ -50,8 +50,9 @@ def verdict(chosen: list, left: list | None = None, threshold: float = math.inf,
             ratios = "/".join(f"{complete.over_floor[k]:.1f}" for k in ("E_p", "E_v", "E_t"))
             return (f"missing: something that moves the next apex (held-out E_p/E_v/E_t at {ratios} x the noise "
                     "floor) and stands out nowhere in the strides")
+        path = "; it changes the path between apexes, not the next apex" if complete and complete.path_only else ""
         return ("missing: something no library effect or discovered term models, at "
-                + "; ".join(loc.words() for loc in unexplained[:2]))
+                + "; ".join(loc.words() for loc in unexplained[:2]) + path)
     parts = []
     for r in chosen:
         c = r.candidate
