@@ -103,6 +103,14 @@ def first_runs(recording) -> tuple[float, float]:
     return times[0], times[1]
 
 
+def blind_recordings(plant: str, names=()) -> Path:
+    """A folder with the recordings of a blind plant's suite (test/<plant>/suite.py; all, or `names`)."""
+    folder = Path(tempfile.mkdtemp())
+    subprocess.run([sys.executable, str(REPO / "test" / plant / "suite.py"), str(folder), *names], check=True,
+                   capture_output=True)
+    return folder
+
+
 def run(quick=False):
     rec, _ = diagnosis_sim_sweep.make_recording(["leg_friction"], Path(tempfile.mkdtemp()), seed=11)
     started = time.perf_counter()
@@ -138,18 +146,12 @@ def run(quick=False):
              {"name": "diagnose_independent_pair_hit_rate_pct", "value": round(ind["pair_hit_rate_pct"], 1),
               "unit": "%"},
              {"name": "diagnose_independent_worse_count", "value": len(ind["worse_after"]), "unit": "recordings"}]
-    folder = Path(tempfile.mkdtemp())
-    subprocess.run([sys.executable, str(REPO / "test" / "plant_b" / "suite.py"), str(folder),
-                    *(QUICK_PLANT_B if quick else ())], check=True, capture_output=True)
-    blind = plant_b_suite.run(folder)
+    blind = plant_b_suite.run(blind_recordings("plant_b", QUICK_PLANT_B if quick else ()))
     rows += [{"name": "diagnose_plant_b_hit_rate_pct", "value": round(blind["hit_rate_pct"], 1), "unit": "%"},
              {"name": "diagnose_plant_b_false_positive_pct", "value": round(blind["false_positive_pct"], 1),
               "unit": "%"},
              {"name": "diagnose_plant_b_worse_count", "value": len(blind["worse_after"]), "unit": "recordings"}]
-    folder = Path(tempfile.mkdtemp())
-    subprocess.run([sys.executable, str(REPO / "test" / "plant_c" / "suite.py"), str(folder),
-                    *(QUICK_PLANT_C if quick else ())], check=True, capture_output=True)
-    third = plant_c_suite.run(folder)
+    third = plant_c_suite.run(blind_recordings("plant_c", QUICK_PLANT_C if quick else ()))
     both = blind["rows"] + third["rows"]
     rows += [{"name": "diagnose_beyond_library_named_pct", "unit": "%",
               "value": round(100.0 * sum(len(r["by_mechanism"]) for r in both)
