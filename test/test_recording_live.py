@@ -95,7 +95,10 @@ def test_sigkill_loses_at_most_the_last_chunk(rclpy_session, hopper_cli, tmp_pat
                           "--chunk-interval", str(interval))
     try:
         recorder.wait_for_line(r"subscribed to /body_measurement")
-        time.sleep(2.0)
+        # two seconds' worth of messages after the subscription (a loaded machine publishes late: count, not time)
+        start, deadline = published[0], time.monotonic() + 20.0
+        while published[0] - start < 2 * rate and time.monotonic() < deadline:
+            time.sleep(0.05)
         at_kill = published[0]
         recorder.process.send_signal(signal.SIGKILL)          # the recorder's own pid: no chance to clean up
         assert recorder.wait() == -signal.SIGKILL
