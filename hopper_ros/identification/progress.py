@@ -24,16 +24,9 @@ class ProgressBar:
                          delay=0 if self._tty else float("inf"))
 
     @property
-    def total(self) -> int:
-        return self._bar.total
-
-    @property
     def done(self) -> int:
+        """Steps done so far."""
         return self._bar.n
-
-    @property
-    def detail(self) -> str:
-        return self._bar.postfix or ""
 
     def note(self, detail: str) -> None:
         """Change the text after the bar (redrawn on a terminal, at most every min_interval)."""
