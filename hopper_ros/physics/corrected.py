@@ -130,13 +130,15 @@ def _predict(params: ModelParams, apex_height, forward_speed, touchdown_angle, t
     x, transposed, complex_transposed = _quadrature(nodes)
     span = xp.where(xp.isfinite(stance_time), stance_time, 0.0)                      # T
     span_c = column(span)
-    if xp is SCALAR:    # T folded into the quadrature matrices
-        transposed, complex_transposed = span * transposed, span * complex_transposed
-        integrate = lambda f: f @ transposed                                          # int_0^{t_j} f
-        integrate_complex = lambda f: f @ complex_transposed
+    # int_0^{t_j} f times m g (the gravity impulse), 1/m (the angle from m theta') and 1 (Duhamel's integral)
+    if xp is SCALAR:    # T and the factors folded into the quadrature matrices
+        by_mg, by_inverse_m, by_one = (m * g * span) * transposed, (span / m) * transposed, span * complex_transposed
+        integrate_mg, integrate_over_m, integrate = (lambda f: f @ by_mg), (lambda f: f @ by_inverse_m), (
+            lambda f: f @ by_one)
     else:
-        integrate = lambda f: span_c * (f @ transposed)
-        integrate_complex = lambda f: span_c * (f @ complex_transposed)
+        integrate_mg = lambda f: (m * g) * span_c * (f @ transposed)
+        integrate_over_m = lambda f: span_c / m * (f @ transposed)
+        integrate = lambda f: span_c * (f @ complex_transposed)
     t = span_c * x                                                                    # (N,) or (n, N)
 
     a_c, w_d_c, omega_c, phase_1_c, phase_2_c = column(a), column(w_d), column(omega), column(phase_1), column(phase_2)
@@ -157,15 +159,16 @@ def _predict(params: ModelParams, apex_height, forward_speed, touchdown_angle, t
     for sweep in range(sweeps):
         if sweep:
             rho = rho_aas + delta
-        momentum = base + (m * g) * integrate(rho * np.sin(theta))                       # 1.
-        theta_dot = momentum / (m * rho * rho)
-        theta = column(theta_td) + integrate(theta_dot)                                  # 2.
+        momentum = base + integrate_mg(rho * np.sin(theta))                                # 1.
+        scaled_rate = momentum / (rho * rho)                                               # m theta'
+        theta = column(theta_td) + integrate_over_m(scaled_rate)                          # 2.
+        theta_dot = scaled_rate / m
         residual = rho * (theta_dot * theta_dot + radial) - g * np.cos(theta) + offset
-        swept = back * integrate_complex(residual * undo)                               # 3. Duhamel
+        swept = back * integrate(residual * undo)                                          # 3. Duhamel
         delta = swept.imag / -w_d_c
     rho = rho_aas + delta
     rho_dot = rho_dot_aas if swept is None else rho_dot_aas + (swept.real - a_c * delta)
-    momentum = base + (m * g) * integrate(rho * np.sin(theta))
+    momentum = base + integrate_mg(rho * np.sin(theta))
     correction = StanceCorrection(rows(t), rows(rho), rows(rho_dot), rows(theta), rows(momentum))
 
     # Lift-off: one Newton step of (2.28) from the seed's T on the corrected leg force.
