@@ -13,5 +13,5 @@ numpy/scipy on top of the model library (`hopper_ros.physics`) and the recording
                 (the simulated GRF experiments: `hopper_ros.harness.grf`)
 - `pipeline`    recording -> strides -> cross-validation -> identifiability
 - `settings`    config/identification.yaml
-- `progress`    the plain-text progress bar
+- `progress`    the progress bar (tqdm's, one line per step off a terminal)
 """

@@ -36,18 +36,16 @@ dominates), so the closed form is the default; `liftoff="root"` iterates to conv
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ._backend import ARRAY, SCALAR, select
-from .flight import NEGLIGIBLE_DAMPING, apex_time_xp, decay_integral, descent_time_xp, flight_state_xp
+from .flight import apex_time_xp, decay_integral, descent_time_xp, flight_state_xp
 from .exact import FAILURE_TEXT, Failure
 from .params import ModelParams
 
-# plain ints: Enum attribute lookups cost a microsecond each in the scalar hot path
-_NONE, _NO_FLIGHT, _NO_LIFTOFF = int(Failure.NONE), int(Failure.NO_FLIGHT), int(Failure.NO_LIFTOFF)
-_NO_COMPRESSION, _APEX_BELOW, _NON_FINITE = int(Failure.NO_COMPRESSION), int(Failure.APEX_BELOW_TOUCHDOWN), int(Failure.NON_FINITE)
+# the failure codes as plain ints: Enum attribute lookups cost a microsecond each on one stride
+NONE, NO_FLIGHT, NO_LIFTOFF = int(Failure.NONE), int(Failure.NO_FLIGHT), int(Failure.NO_LIFTOFF)
+NO_COMPRESSION, APEX_BELOW, NON_FINITE = int(Failure.NO_COMPRESSION), int(Failure.APEX_BELOW_TOUCHDOWN), int(Failure.NON_FINITE)
 
 MOMENTUM_ITERATIONS = 3    # passes of the fixed point (2.34), Aitken-accelerated: within 2e-5
                            # (relative) of the converged map on the thesis ranges
@@ -110,16 +108,6 @@ class StanceSolution:
         self.force_offset = k * offset                          # k (rho_0 - F/w0^2) of (2.29)
         self.mean_angle_rate = omega * (3.0 - 2.0 * rho_eq / rho_0)             # X (2.24)
         self.angle_amplitude = 2.0 * omega * self.amplitude / (rho_0 * w0)      # Y (2.25)
-
-    @classmethod
-    def _from_fields(cls, touchdown_angle, rest_length, fields) -> "StanceSolution":
-        """A scalar solution from the fields __init__ computes (on floats, `_predict_aas_scalar`)."""
-        out = cls.__new__(cls)
-        out.xp, out.touchdown_angle, out.rest_length = SCALAR, touchdown_angle, rest_length
-        (out.angular_rate, out.natural_frequency, out.damping_ratio, out.damped_frequency, out.decay_rate,
-         out.equilibrium_length, out.amplitude, out.phase_1, out.phase_2, out.phase_3, out.force_amplitude,
-         out.force_offset, out.mean_angle_rate, out.angle_amplitude) = fields
-        return out
 
     def as_array(self) -> "StanceSolution":
         """The same solution on numpy arrays (1-D), e.g. to evaluate it on a grid of times."""
@@ -268,243 +256,54 @@ def predict_aas(params: ModelParams, apex_height, forward_speed, touchdown_angle
     xp = select(apex_height, forward_speed, touchdown_angle, tau_0, ramp_duration)
     if liftoff not in ("closed_form", "root"):
         raise ValueError(f"liftoff must be 'closed_form' or 'root', got {liftoff!r}")
-    if xp is SCALAR:
-        return _predict_aas_scalar(params, float(apex_height), float(forward_speed), float(touchdown_angle),
-                                   float(tau_0), ramp_duration, 1 + ROOT_ITERATIONS if liftoff == "root" else 1,
-                                   momentum_iterations)
     apex_height, forward_speed = xp.asarray(apex_height), xp.asarray(forward_speed)
     touchdown_angle, tau_0 = xp.asarray(touchdown_angle), xp.asarray(tau_0)
     m, g, rho_0 = params.body_mass, params.gravity, params.rest_length
+    m_g = m * g
 
     ok_td, t_d, y_td, ydot_td, zdot_td, rho_dot_td, theta_dot_td = descend(xp, params, apex_height, forward_speed, touchdown_angle)
     momentum_td = m * rho_0 * rho_0 * theta_dot_td
-    gravity_arm_td = 2.0 * rho_0 * xp.sin(touchdown_angle)
+    sin_td = xp.sin(touchdown_angle)
+    gravity_arm_td = 2.0 * rho_0 * sin_td
     iterations = 1 + ROOT_ITERATIONS if liftoff == "root" else 1
 
-    def momentum_map(momentum, t_guess):
-        """One pass of (2.34): stance for p_hat -> lift-off -> the corrected p_hat."""
-        stance = StanceSolution(xp, params, momentum, rho_dot_td, touchdown_angle)
-        t_lo = stance.liftoff_time(t_guess, iterations)
-        rho_lo, theta_lo = stance.leg_length(t_lo), stance.leg_angle(t_lo)
-        t_f = t_lo if ramp_duration is None else ramp_duration
-        updated = (momentum_td - tau_0 * mean_ramp_impulse(xp, t_lo, t_f)                # (2.34)-(2.36)
-                   + m * g * t_lo / 6.0 * (gravity_arm_td + rho_lo * xp.sin(theta_lo)))   # (2.37)
-        return updated, stance, t_lo, t_f, rho_lo, theta_lo
-
-    # Fixed point p_hat = G(p_hat) from a physical guess (half-period stance, symmetric sweep:
-    # rho_lo ~ rho_0, theta_lo ~ -theta_td), accelerated by Aitken's delta-squared.
+    # Fixed point p_hat = G(p_hat) of (2.34) from a physical guess (half-period stance, symmetric
+    # sweep: rho_lo ~ rho_0, theta_lo ~ -theta_td), accelerated by Aitken's delta-squared: p1 = G(p0);
+    # (momentum_iterations - 2) times p2 = G(p1) and Aitken's step; the last pass G(p1) gives the stance.
     half_period = xp.pi / xp.sqrt(params.stiffness / m + 3.0 * theta_dot_td * theta_dot_td)  # omega = theta_dot_td
-    t_f_guess = half_period if ramp_duration is None else ramp_duration
-    p0 = (momentum_td - tau_0 * mean_ramp_impulse(xp, half_period, t_f_guess)
-          + m * g * half_period / 6.0 * rho_0 * xp.sin(touchdown_angle))
-    p1, *_ = momentum_map(p0, None)
-    for _ in range(momentum_iterations - 2):
-        p2, *_ = momentum_map(p1, None)
-        curvature = p2 - 2.0 * p1 + p0
-        usable = xp.abs(curvature) > 1e-15
-        p0, p1 = p1, xp.where(usable, p2 - (p2 - p1) ** 2 / xp.where(usable, curvature, 1.0), p2)
-    _, stance, t_lo, t_f, rho_lo, theta_lo = momentum_map(p1, None)
-    ok_lo = xp.abs(stance.liftoff_ratio(t_lo)) < 1.0
-    return _finish(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zdot_td, theta_dot_td,
-                   t_lo, t_f, rho_lo, stance.leg_rate(t_lo), theta_lo, stance.leg_angle_rate(t_lo))
-
-
-class _Constants:
-    """Products of the parameters that the scalar path needs in every pass, each the leading
-    operands of the generic path's expression (so the same value to the last bit)."""
-
-    __slots__ = ("params", "m_rho_sq", "k_over_m", "two_m", "forcing_0", "four_rho_0", "k_sq", "two_k", "m_g",
-                 "collision_factor")
-
-    def __init__(self, params: ModelParams):
-        m, g, k, rho_0 = params.body_mass, params.gravity, params.stiffness, params.rest_length
-        self.params = params
-        self.m_rho_sq = m * rho_0 * rho_0            # m rho_0^2 (omega, p_td)
-        self.k_over_m = k / m                        # w0^2 = k/m + 3 omega^2
-        self.two_m = 2.0 * m                         # zeta = d / (2 m w0)
-        self.forcing_0 = -g + rho_0 * k / m          # F = -g + rho_0 k/m + 4 rho_0 omega^2
-        self.four_rho_0 = 4.0 * rho_0
-        self.k_sq = k * k                            # M_bar^2 = k^2 - 2 k d w0 zeta + (d w0)^2
-        self.two_k = 2.0 * k
-        self.m_g = m * g                             # gravity impulse (2.37)
-        self.collision_factor = params.collision_factor
-
-
-def _decay_integral(rate, t):
-    """flight.decay_integral on floats."""
-    return t if rate < NEGLIGIBLE_DAMPING else -math.expm1(-rate * t) / rate
-
-
-def _descend_scalar(params: ModelParams, apex_height: float, forward_speed: float, touchdown_angle: float):
-    """`descend` with `flight.descent_time_xp` on floats, the same operations in the same order."""
-    g, dh, dv, rho_0 = params.gravity, params.flight_damping_horizontal, params.flight_damping_vertical, params.rest_length
-    c = math.cos(touchdown_angle)
-    drop = apex_height - rho_0 * c
-    fall = max(drop, 0.0)
-    t_d = math.sqrt(2.0 * fall / g)
-    if dv >= NEGLIGIBLE_DAMPING:
-        expm1 = math.expm1
-        t_d = t_d * (1.0 + dv * t_d / 6.0)
-        for _ in range(2):
-            decay = -expm1(-dv * t_d) / dv
-            fallen = g * (t_d - decay) / dv
-            t_d = t_d - (fallen - fall) / max(g * decay, 1e-300)
-    y_td = forward_speed * _decay_integral(dh, t_d)
-    ydot = forward_speed * math.exp(-dh * t_d)
-    zdot = -g * _decay_integral(dv, t_d)
-    s = math.sin(touchdown_angle)
-    return drop > 0.0, t_d, y_td, ydot, zdot, -ydot * s + zdot * c, (-ydot * c - zdot * s) / rho_0
-
-
-def _finish_scalar(params, collision_factor, sin_td, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zdot_td,
-                   theta_dot_td, t_lo, t_f, rho_lo, rho_dot_lo, theta_lo, theta_dot_lo, stance) -> StridePrediction:
-    """`_finish` with `ascend` on floats (sin_td = sin(theta_td)), the same operations in the same order."""
-    g, dh, dv, rho_0 = params.gravity, params.flight_damping_horizontal, params.flight_damping_vertical, params.rest_length
-    s, c = math.sin(theta_lo), math.cos(theta_lo)
-    ydot_lo = -rho_dot_lo * s - rho_lo * theta_dot_lo * c
-    zdot_lo = rho_dot_lo * c - rho_lo * theta_dot_lo * s
-    y_lo = y_td + rho_0 * sin_td - rho_lo * s
-    z_lo = rho_lo * c
-    ydot, zdot = collision_factor * ydot_lo, collision_factor * zdot_lo      # (2.12), then R_as (2.5)
-    rising = max(zdot, 0.0)
-    if dv < NEGLIGIBLE_DAMPING:
-        t_a, fall = rising / g, -0.5 * (rising / g) * (rising / g)
-    else:
-        t_a = math.log1p(dv * rising / g) / dv
-        x = dv * t_a
-        fall = (-math.expm1(-x) - x) / (dv * dv)
-    y1 = y_lo + ydot * _decay_integral(dh, t_a)                                # (2.13)-(2.15)
-    z1 = z_lo + g * fall + zdot * _decay_integral(dv, t_a)
-    speed1 = ydot * math.exp(-dh * t_a)
-    if not ok_td:
-        code = _APEX_BELOW
-    elif not rho_dot_td < 0.0:
-        code = _NO_COMPRESSION
-    elif not ok_lo:
-        code = _NO_LIFTOFF
-    elif not zdot > 0.0:
-        code = _NO_FLIGHT
-    else:
-        code = _NONE if math.isfinite(z1 + speed1 + y1) else _NON_FINITE
-    out = StridePrediction()
-    ok = code == _NONE
-    out.ok, out.failure_code = ok, code
-    if ok:
-        out.next_apex_height, out.next_forward_speed, out.stride_length, out.stride_time = z1, speed1, y1, t_d + t_lo + t_a
-    else:
-        out.next_apex_height = out.next_forward_speed = out.stride_length = out.stride_time = math.nan
-    out.descent_time, out.stance_time, out.ascent_time, out.ramp_duration = t_d, t_lo, t_a, t_f
-    out.touchdown_y, out.touchdown_ydot, out.touchdown_zdot = y_td, ydot_td, zdot_td
-    out.touchdown_rho_dot, out.touchdown_theta_dot = rho_dot_td, theta_dot_td
-    out.liftoff_y, out.liftoff_z, out.liftoff_ydot, out.liftoff_zdot = y_lo, z_lo, ydot_lo, zdot_lo
-    out.liftoff_rho, out.liftoff_theta, out.liftoff_rho_dot, out.liftoff_theta_dot = rho_lo, theta_lo, rho_dot_lo, theta_dot_lo
-    out.stance = stance
-    return out
-
-
-_constants: _Constants | None = None
-
-
-def _predict_aas_scalar(params: ModelParams, apex_height: float, forward_speed: float, touchdown_angle: float,
-                        tau_0: float, ramp_duration, iterations: int, momentum_iterations: int) -> StridePrediction:
-    """`predict_aas` on floats: the generic path with `xp = SCALAR` written out with `math`, the
-    same operations in the same order (identical results to the last bit), parameter products
-    computed once per parameter set (`_Constants`), and one `StanceSolution` built at the end
-    instead of one per pass of (2.34)."""
-    global _constants
-    c = _constants
-    if c is None or c.params is not params:
-        c = _constants = _Constants(params)
-    k, d, rho_0 = params.stiffness, params.damping, params.rest_length
-    m_rho_sq, k_over_m, two_m, forcing_0, four_rho_0, k_sq, two_k, m_g = (
-        c.m_rho_sq, c.k_over_m, c.two_m, c.forcing_0, c.four_rho_0, c.k_sq, c.two_k, c.m_g)
-    exp, cos, sin, acos, sqrt, atan2 = math.exp, math.cos, math.sin, math.acos, math.sqrt, math.atan2
-    pi, two_pi = math.pi, 2.0 * math.pi
-    ok_td, t_d, y_td, ydot_td, zdot_td, rho_dot_td, theta_dot_td = _descend_scalar(params, apex_height, forward_speed,
-                                                                                   touchdown_angle)
-    momentum_td = m_rho_sq * theta_dot_td
-    sin_td = sin(touchdown_angle)
-    gravity_arm_td = 2.0 * rho_0 * sin_td
-    fixed_ramp = ramp_duration is not None
-
-    half_period = pi / sqrt(k_over_m + 3.0 * theta_dot_td * theta_dot_td)
-    t_ramp, t_stance = max(ramp_duration if fixed_ramp else half_period, 1e-12), max(half_period, 1e-12)
-    impulse = (t_stance / 2.0 - t_stance * t_stance / (6.0 * t_ramp) if t_stance <= t_ramp
-               else t_ramp / 2.0 - t_ramp * t_ramp / (6.0 * t_stance))
-    p0 = momentum_td - tau_0 * impulse + m_g * half_period / 6.0 * rho_0 * sin_td
-    # The generic path's passes, inline: p1 = G(p0); (momentum_iterations - 2) times p2 = G(p1) and
-    # Aitken's step; the last pass G(p1) gives the stance. Each pass is StanceSolution.__init__,
-    # liftoff_time (2.29), leg_length (2.17), leg_angle (2.19) and (2.34)-(2.37) on floats.
+    t_f = half_period if ramp_duration is None else ramp_duration
+    p0 = momentum_td - tau_0 * mean_ramp_impulse(xp, half_period, t_f) + m_g * half_period / 6.0 * rho_0 * sin_td
     passes = max(momentum_iterations, 2)
     momentum = p1 = p0
     for index in range(passes):
-        omega = momentum / m_rho_sq
-        w0_sq = k_over_m + 3.0 * omega * omega
-        w0 = sqrt(w0_sq)
-        zeta = d / (two_m * w0)
-        w_d = w0 * sqrt(1.0 - zeta * zeta)
-        a = zeta * w0
-        rho_eq = (forcing_0 + four_rho_0 * omega * omega) / w0_sq
-        offset = rho_0 - rho_eq
-        b = (rho_dot_td + a * offset) / w_d
-        dw = d * w0
-        amplitude = math.hypot(offset, b)
-        phase_1, phase_2 = atan2(-b, offset), -acos(zeta)
-        phase_3 = atan2(dw * (-w_d / w0), dw * zeta - k)
-        force_amplitude, force_offset = sqrt(k_sq - two_k * dw * zeta + dw * dw), k * offset
-        x = omega * (3.0 - 2.0 * rho_eq / rho_0)
-        y = 2.0 * omega * amplitude / (rho_0 * w0)
-        t_lo = 2.0 * ((0.5 * pi - phase_1 - phase_2) % pi / w_d)                        # 2 t_b
-        for _ in range(iterations):                                                     # (2.29)
-            ratio = -force_offset * exp(a * t_lo) / (amplitude * force_amplitude)
-            ratio = -1.0 if ratio < -1.0 else 1.0 if ratio > 1.0 else ratio
-            t_lo = (acos(ratio) - phase_1 - phase_3) % two_pi / w_d
-        decay = exp(-a * t_lo)
-        rho_lo = amplitude * decay * cos(w_d * t_lo + phase_1) + rho_eq                 # (2.17)
-        shift = phase_1 - phase_2
-        theta_lo = touchdown_angle + x * t_lo + y * (decay * cos(w_d * t_lo + shift) - cos(shift))   # (2.19)
-        t_f = ramp_duration if fixed_ramp else t_lo
+        stance = StanceSolution(xp, params, momentum, rho_dot_td, touchdown_angle)   # one pass: stance for p_hat
+        t_lo = stance.liftoff_time(None, iterations)                                 # -> lift-off (2.29)
+        rho_lo, theta_lo = stance.leg_length(t_lo), stance.leg_angle(t_lo)
+        t_f = t_lo if ramp_duration is None else ramp_duration
         if index == passes - 1:
             break
-        t_ramp, t_stance = max(t_f, 1e-12), max(t_lo, 1e-12)                        # (2.34)-(2.36)
-        impulse = (t_stance / 2.0 - t_stance * t_stance / (6.0 * t_ramp) if t_stance <= t_ramp
-                   else t_ramp / 2.0 - t_ramp * t_ramp / (6.0 * t_stance))
-        updated = momentum_td - tau_0 * impulse + m_g * t_lo / 6.0 * (gravity_arm_td + rho_lo * sin(theta_lo))  # (2.37)
+        updated = (momentum_td - tau_0 * mean_ramp_impulse(xp, t_lo, t_f)            # -> (2.34)-(2.36)
+                   + m_g * t_lo / 6.0 * (gravity_arm_td + rho_lo * xp.sin(theta_lo)))   # (2.37)
         if index == 0:
             p1 = updated
-        else:                                                                           # Aitken
+        else:
             curvature = updated - 2.0 * p1 + p0
-            p0, p1 = p1, (updated - (updated - p1) ** 2 / curvature if abs(curvature) > 1e-15 else updated)
+            usable = xp.abs(curvature) > 1e-15
+            p0, p1 = p1, xp.where(usable, updated - (updated - p1) ** 2 / xp.where(usable, curvature, 1.0), updated)
         momentum = p1
-    fields = (omega, w0, zeta, w_d, a, rho_eq, amplitude, phase_1, phase_2, phase_3, force_amplitude, force_offset,
-              x, y)
-    stance = StanceSolution._from_fields(touchdown_angle, rho_0, fields)
-    ok_lo = abs(-force_offset * exp(a * t_lo) / (amplitude * force_amplitude)) < 1.0
-    decay = exp(-a * t_lo)
-    rho_dot_lo = -amplitude * w0 * decay * cos(w_d * t_lo + phase_1 + phase_2)                  # (2.18)
-    theta_dot_lo = x - 2.0 * omega * amplitude / rho_0 * decay * cos(w_d * t_lo + phase_1)         # (2.20)
-    return _finish_scalar(params, c.collision_factor, sin_td, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zdot_td,
-                          theta_dot_td, t_lo, t_f, rho_lo, rho_dot_lo, theta_lo, theta_dot_lo, stance)
+    ok_lo = xp.abs(stance.liftoff_ratio(t_lo)) < 1.0
+    return finish_stride(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zdot_td, theta_dot_td,
+                   t_lo, t_f, rho_lo, stance.leg_rate(t_lo), theta_lo, stance.leg_angle_rate(t_lo))
 
 
-def _failure_code(xp, ok_touchdown, compressing, ok_liftoff, ok_flight, result_sum):
+def failure_code(xp, ok_touchdown, compressing, ok_liftoff, ok_flight, result_sum):
     """The first failure of a stride (an `exact.Failure` value; an int array for many)."""
-    if xp is SCALAR:  # plain branches: this runs once per stride in the scalar hot path
-        if not ok_touchdown:
-            return _APEX_BELOW
-        if not compressing:
-            return _NO_COMPRESSION
-        if not ok_liftoff:
-            return _NO_LIFTOFF
-        if not ok_flight:
-            return _NO_FLIGHT
-        return _NONE if xp.isfinite(result_sum) else _NON_FINITE
-    code = xp.where(ok_touchdown, xp.where(compressing, xp.where(ok_liftoff, xp.where(ok_flight, _NONE, _NO_FLIGHT),
-                                                                 _NO_LIFTOFF), _NO_COMPRESSION), _APEX_BELOW)
-    return xp.to_int(xp.where((code == _NONE) & ~xp.isfinite(result_sum), _NON_FINITE, code))
+    return xp.to_int(xp.where(ok_touchdown, xp.where(compressing, xp.where(ok_liftoff, xp.where(
+        ok_flight, xp.where(xp.isfinite(result_sum), NONE, NON_FINITE), NO_FLIGHT), NO_LIFTOFF), NO_COMPRESSION),
+        APEX_BELOW))
 
 
-def _finish(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zdot_td, theta_dot_td,
+def finish_stride(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zdot_td, theta_dot_td,
             t_lo, t_f, rho_lo, rho_dot_lo, theta_lo, theta_dot_lo) -> StridePrediction:
     """Lift-off state -> collision -> ascent, and the prediction record (shared by predictors)."""
     rho_0 = params.rest_length
@@ -514,16 +313,13 @@ def _finish(xp, params, stance, ok_td, ok_lo, rho_dot_td, t_d, y_td, ydot_td, zd
     y_lo = y_td + rho_0 * xp.sin(stance.touchdown_angle) - rho_lo * s
     z_lo = rho_lo * c
     ok_up, t_a, y1, z1, speed1 = ascend(xp, params, y_lo, z_lo, ydot_lo, zdot_lo)
-    code = _failure_code(xp, ok_td, rho_dot_td < 0.0, ok_lo, ok_up, z1 + speed1 + y1)
-    ok = code == _NONE
+    code = failure_code(xp, ok_td, rho_dot_td < 0.0, ok_lo, ok_up, z1 + speed1 + y1)
+    ok = code == NONE
     nan = xp.nan
     out = StridePrediction()
     out.ok, out.failure_code = ok, code
-    if xp is SCALAR and ok:
-        out.next_apex_height, out.next_forward_speed, out.stride_length, out.stride_time = z1, speed1, y1, t_d + t_lo + t_a
-    else:
-        out.next_apex_height, out.next_forward_speed = xp.where(ok, z1, nan), xp.where(ok, speed1, nan)
-        out.stride_length, out.stride_time = xp.where(ok, y1, nan), xp.where(ok, t_d + t_lo + t_a, nan)
+    out.next_apex_height, out.next_forward_speed = xp.where(ok, z1, nan), xp.where(ok, speed1, nan)
+    out.stride_length, out.stride_time = xp.where(ok, y1, nan), xp.where(ok, t_d + t_lo + t_a, nan)
     out.descent_time, out.stance_time, out.ascent_time, out.ramp_duration = t_d, t_lo, t_a, t_f
     out.touchdown_y, out.touchdown_ydot, out.touchdown_zdot = y_td, ydot_td, zdot_td
     out.touchdown_rho_dot, out.touchdown_theta_dot = rho_dot_td, theta_dot_td

@@ -6,7 +6,10 @@
 - `cia402`    the CiA 402 device control as tables, the fault reset's edges
 - `startup`   the PDO layout, the start-up SDO sequence and the shutdown sequence
 - `units`     SI <-> drive units (mA, qc, rpm)
-- `driver`    MotorDriver: commands, frames, the SYNC cycle, safety (command watchdog, faults)
+- `driver`    MotorDriver: commands, the SYNC cycle, frames out, safety (command watchdog, faults)
+- `received`  its handling of received frames: TPDOs, SDO answers, EMCY, heartbeats, state changes
+- `sequence`  its start-up and shutdown sequences run against the drive (retries, failures)
+- `status`    DriveStatus, Phase, how a bus failure reads
 - `cycle`     CycleLoop: the 1 kHz loop in a thread of its own (what the node runs)
 The node hopper_ros/nodes/motor_driver.py adapts it to ROS. Description: docs/motor_driver.md.
 """

@@ -13,8 +13,8 @@ config/hardware.yaml). The caller drives it (`cycle.CycleLoop` does, for the nod
 - `shutdown()` at the end: power stage off (confirmed by the drive), our heartbeat consumer in the
   drive switched off, NMT pre-operational. It pumps the bus itself.
 
-The start-up sequence and the PDO layout: `startup.py`; the CiA 402 walk: `cia402.py`; units:
-`units.py`. Exactly one RPDO per SYNC period unless commands arrive faster.
+The start-up sequence and the PDO layout: `startup.py`, run by `sequence.py`; received frames:
+`received.py`; the CiA 402 walk: `cia402.py`; units: `units.py`; status and phase: `status.py`. Exactly one RPDO per SYNC period unless commands arrive faster.
 
 Safety: the drive is enabled only while valid commands keep arriving (`command_timeout`; a stale
 stream ends with the current setpoint zeroed and a quick stop in the same RPDO, then disable
@@ -28,38 +28,29 @@ stream acknowledged it with a disable command. Units: SI at this module's edges,
 from __future__ import annotations
 
 import math
-import struct
 import time
-from dataclasses import dataclass
-from enum import Enum
 from typing import Callable
 
 import can
 
 from hopper_ros.canbus import epos2_objects as eo
-from hopper_ros.canbus.epos2_objects import Command, NmtCommand, NmtState, OperationMode, State
-from hopper_ros.canbus.cia301.master import (
-    HeartbeatConsumer,
-    MalformedFrame,
-    SdoClient,
-    SdoError,
-    SdoTransfer,
-    decode_emcy,
-    heartbeat_frame,
-    nmt_frame,
-    nmt_state_name,
-    sync_frame,
-)
+from hopper_ros.canbus.epos2_objects import Command, OperationMode, State
+from hopper_ros.canbus.cia301.master import HeartbeatConsumer, SdoClient, heartbeat_frame, sync_frame
 from hopper_ros.runtime.gaps import GapHistogram
 from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.physics.laws import ramp_torque
 
-from . import cia402, startup
-from .cia402 import DISABLED_STATES, FAULT_STATES, FaultReset
+from . import cia402
+from .cia402 import FAULT_STATES, FaultReset
+from .received import ReceivedFrames
+from .sequence import StartupAndShutdown
 from .settings import (COUNTER_NAMES, ERROR, INFO, MODE_CURRENT, MODE_DISABLED, MODE_NAMES, MODE_POSITION, MODE_RAMP,
                        WARN, DriveConfig, DriverSettings)
 from .startup import RPDO_MAPPINGS, TPDO_MAPPINGS
+from .status import DriveStatus, Phase, connection_closed, first_line
 from .units import DriveUnits
+
+__all__ = ["MotorDriver", "DriveStatus", "Phase", "connection_closed", "first_line", "RAMP_RESTAMP", "SILENT_SYNCS"]
 
 RAMP_RESTAMP = 0.0005   # [s] a MODE_RAMP stamp moved by more than this re-anchors the running ramp (repeats of
                         #   one stamp differ by the command's transit jitter only)
@@ -68,56 +59,7 @@ SILENT_SYNCS = 3        # this many SYNCs in a row the drive left unanswered: it
                         #   answers again
 
 
-def connection_closed(exc: BaseException) -> bool:
-    """Whether a bus error is the transport's connection closed by its other end (a socketcand hub
-    that went away: reset, broken pipe): no later frame will pass, unlike a CAN error."""
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, (ConnectionResetError, BrokenPipeError, ConnectionAbortedError)):
-            return True
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return False
-
-
-def first_line(exc: BaseException) -> str:
-    """An exception's message without the traceback some python-can errors carry in it."""
-    text = str(exc).strip()
-    return text.split("Traceback (most recent call last)")[0].strip().splitlines()[0] if text else type(exc).__name__
-
-
-class Phase(str, Enum):
-    STARTING = "starting"       # start-up sequence (NMT, SDO configuration) in progress
-    RUNNING = "running"         # operational: SYNC, PDOs, state machine
-    FAILED = "failed"           # start-up failed; retried after settings.startup_retry
-    SHUTTING_DOWN = "shutting_down"
-    STOPPED = "stopped"
-
-
-@dataclass
-class DriveStatus:
-    """What the driver knows of the drive, SI units."""
-
-    stamp: float = math.nan             # time of the TPDO it comes from
-    state: State | None = None          # CiA 402 state (None: not known yet)
-    statusword: int = 0
-    operation_mode: int = 0             # modes of operation display (EPOS2: -3 current, -1 position)
-    commanded_mode: int = MODE_DISABLED  # command being executed (MODE_*)
-    position: float = math.nan          # leg angle [rad]
-    velocity: float = math.nan          # leg angular velocity [rad/s]
-    current: float = math.nan           # motor current [A]
-    torque: float = math.nan            # hip torque [N m]
-    fault_code: int = 0                 # last error code seen (EMCY / 0x603F), 0: none
-    fault_text: str = ""
-    heartbeat_ok: bool = False
-    nmt_state: int | None = None
-
-    @property
-    def state_name(self) -> str:
-        return "UNKNOWN" if self.state is None else self.state.value.replace("_", " ")
-
-
-class MotorDriver:
+class MotorDriver(ReceivedFrames, StartupAndShutdown):
     """CANopen master of one EPOS2 (see the module docstring). Not thread-safe: one caller at a time."""
 
     def __init__(self, bus: can.BusABC, hardware: HardwareConfig | DriveConfig,
@@ -306,77 +248,6 @@ class MotorDriver:
                           "quick stop, then disable")
         return True
 
-    def handle(self, frame: can.Message) -> bool:
-        """Take one received frame; True when it completed the TPDOs of a SYNC (new status)."""
-        now = self.clock()
-        self.counters["frames_received"] += 1
-        if frame.is_error_frame:
-            self._bus_error(now, "error frame received")
-            return False
-        if frame.is_extended_id or frame.is_remote_frame:
-            return False
-        handler = self._cob.get(frame.arbitration_id)
-        if handler is None:
-            return False
-        try:
-            return bool(handler(bytes(frame.data), now))
-        except MalformedFrame as exc:
-            self.counters["malformed_frames"] += 1
-            self._event(WARN, f"malformed frame 0x{frame.arbitration_id:03X} [{bytes(frame.data).hex()}]: {exc}",
-                        key="malformed")
-            return False
-
-    def shutdown(self, timeout: float | None = None) -> bool:
-        """Bring the drive to a safe stop, pumping the bus; True if the drive confirmed it is disabled.
-
-        Power stage off (controlword "disable voltage" by PDO while running, then by SDO), the
-        statusword read back, the drive's consumer of our heartbeat switched off, NMT
-        pre-operational (no more PDOs). Bounded by `timeout` (default settings.shutdown_timeout).
-        """
-        timeout = self.settings.shutdown_timeout if timeout is None else timeout
-        self.begin_shutdown()
-        deadline = self.clock() + timeout
-        next_cycle = self.clock()
-        while self.phase is not Phase.STOPPED:
-            now = self.clock()
-            if now >= deadline:
-                break
-            if now >= next_cycle:
-                self.cycle()
-                next_cycle += self.settings.sync_period
-                continue
-            try:
-                frame = self.bus.recv(timeout=min(next_cycle, deadline) - now)
-            except (can.CanError, OSError) as exc:
-                self._bus_error(self.clock(), f"receive failed: {exc}")
-                frame = None
-            if frame is not None:
-                self.handle(frame)
-        if self.phase is not Phase.STOPPED:
-            self.sdo.abort()
-            self._send(self._rpdo_frame(1, Command.DISABLE_VOLTAGE))   # last word, even unconfirmed
-            self._send(nmt_frame(NmtCommand.ENTER_PRE_OPERATIONAL, self.node_id))
-            self.phase = Phase.STOPPED
-            self._event(ERROR, "shutdown: the drive did not confirm it is disabled")
-        return self._shutdown_confirmed
-
-    def begin_shutdown(self) -> None:
-        """Start the shutdown sequence; `cycle()` and `handle()` carry it out (see `shutdown`)."""
-        if self.phase in (Phase.SHUTTING_DOWN, Phase.STOPPED):
-            return
-        was_running = self.phase is Phase.RUNNING
-        self.sdo.abort()
-        self._want_enabled, self._quick_stop = False, False
-        self._shutdown_confirmed = False
-        self.phase = Phase.SHUTTING_DOWN
-        self._steps = startup.shutdown_steps(self.clock() + 0.05 if was_running else None, self.settings,
-                                             self._check_disabled)
-
-    @property
-    def shutdown_confirmed(self) -> bool:
-        """The drive confirmed (statusword) that its power stage is off, during the shutdown."""
-        return self._shutdown_confirmed
-
     @property
     def enabled(self) -> bool:
         return self.status.state is State.OPERATION_ENABLED
@@ -426,104 +297,6 @@ class MotorDriver:
     def leg_rate_for_rpm(self, rpm: float) -> float:
         """Leg angular velocity [rad/s] for a motor speed [rpm] (inverse of HipMotor.motor_speed_rpm)."""
         return self.units.leg_rate_for_rpm(rpm)
-
-    # ================================================================== frames in
-
-    def _on_tpdo1(self, data: bytes, now: float) -> bool:
-        statusword, position, current_ma = TPDO_MAPPINGS[1].decode(data)
-        status = self.status
-        state = eo.decode_statusword(statusword)
-        if state != status.state:
-            self._on_state_change(status.state, state, now)
-        status.stamp, status.statusword, status.state = now, statusword, state
-        status.position = self.units.angle(position)
-        status.current = current_ma / 1000.0
-        status.torque = self.units.torque(status.current)
-        status.commanded_mode = self._mode if (self._want_enabled and state is State.OPERATION_ENABLED) else MODE_DISABLED
-        return self._tpdo_received(1, now)
-
-    def _on_tpdo2(self, data: bytes, now: float) -> bool:
-        rpm, mode, error_code = TPDO_MAPPINGS[2].decode(data)
-        status = self.status
-        status.velocity = self.leg_rate_for_rpm(rpm)
-        status.operation_mode = mode
-        if error_code and error_code != status.fault_code:
-            self._set_fault(error_code)
-        return self._tpdo_received(2, now)
-
-    def _tpdo_received(self, number: int, now: float) -> bool:
-        self.counters["tpdo_received"] += 1
-        self._tpdo_seen |= 1 << (number - 1)
-        if self._sync_outstanding and self._tpdo_seen == (1 << len(TPDO_MAPPINGS)) - 1:
-            self._sync_outstanding = False
-            self._last_answer = now
-            return True
-        return False
-
-    def _on_sdo(self, data: bytes, now: float) -> bool:
-        try:
-            transfer = self.sdo.on_frame(data)
-        except MalformedFrame as exc:
-            if exc.transfer is not None:
-                self._sdo_done(exc.transfer, now)
-            raise
-        if transfer is not None:
-            self._sdo_done(transfer, now)
-        return False
-
-    def _on_emcy(self, data: bytes, now: float) -> bool:
-        emergency = decode_emcy(data)
-        self.counters["emcy_received"] += 1
-        if emergency.is_reset:
-            self._event(INFO, "drive EMCY: error reset")
-        else:
-            self._set_fault(emergency.code)
-            self._event(ERROR, f"drive EMCY 0x{emergency.code:04X}: {emergency.text} "
-                               f"(error register 0x{emergency.register:02X})")
-        return False
-
-    def _on_heartbeat(self, data: bytes, now: float) -> bool:
-        was_alive = self.heartbeat.alive and self.heartbeat.last_seen is not None
-        state = self.heartbeat.on_frame(data, now)
-        self.status.nmt_state = state
-        self.status.heartbeat_ok = True
-        if not was_alive and self.heartbeat.last_seen is not None and self.counters["heartbeat_losses"]:
-            self._event(INFO, f"drive heartbeat back ({nmt_state_name(state)})")
-        if state == NmtState.BOOTUP:
-            self.counters["drive_bootups"] += 1
-            if self.phase in (Phase.RUNNING, Phase.FAILED):
-                self._event(WARN, "drive rebooted: configuring it again")
-                self._begin_startup(now)
-        elif (self.phase is Phase.RUNNING and state != NmtState.OPERATIONAL
-              and now - self._nmt_start_sent_at > self.heartbeat_period):
-            self._event(WARN, f"drive in NMT {nmt_state_name(state)}: starting it again")
-            self._nmt_start_sent_at = now
-            self._send(nmt_frame(NmtCommand.START, self.node_id))
-        return False
-
-    def _set_fault(self, code: int) -> None:
-        self.status.fault_code = code
-        self.status.fault_text = eo.error_text(code)
-
-    def _on_state_change(self, old: State | None, new: State, now: float) -> None:
-        self._event(INFO, f"drive state {old.value if old else 'UNKNOWN'} -> {new.value}")
-        if new in FAULT_STATES and old not in FAULT_STATES:
-            self.counters["faults"] += 1
-            self._reset.edges = 0
-            if old is not None or not self._reset.armed:
-                self._reset.armed = False    # a fault in operation waits for an acknowledgement
-            if not self.status.fault_code:
-                self._request_error_code()
-            self._event(ERROR, "drive fault" + (f" 0x{self.status.fault_code:04X}: {self.status.fault_text}"
-                                                if self.status.fault_code else "") + ": drive disabled")
-        elif old in FAULT_STATES and new not in FAULT_STATES:
-            self.counters["fault_resets"] += 1
-            self._reset.disarm()
-            self._event(INFO, "drive fault reset")
-
-    def _request_error_code(self) -> None:
-        if self.phase is Phase.RUNNING and not self.sdo.busy:
-            self.sdo.upload(eo.ERROR_CODE, 0, self.clock(), tag=("error_code",))
 
     # ================================================================== frames out
 
@@ -618,122 +391,6 @@ class MotorDriver:
             self._last_cw = controlword
             self._sent_since_sync = key
             self._last_rpdo, self._last_rpdo_time = key, now
-
-    # ================================================================== start-up and shutdown
-
-    def _begin_startup(self, now: float) -> None:
-        self.sdo.abort()
-        self._startup_answered = False
-        self.phase = Phase.STARTING
-        self._sync_outstanding = False
-        self._reset.arm()
-        self.status.state = None
-        self._steps = startup.startup_steps(self.drive, self.settings, self._check_device_type, self._record_error_code)
-
-    def _advance(self, now: float) -> None:
-        """Run the sequence's steps until one waits for the drive (an SDO in flight)."""
-        while self._steps and not self.sdo.busy and self.phase in (Phase.STARTING, Phase.SHUTTING_DOWN):
-            step = self._steps[0]
-            kind = step[0]
-            if kind == "pdo_disable":
-                if self.status.state in DISABLED_STATES or now >= step[1] or not self.heartbeat.alive:
-                    self._shutdown_confirmed = self.status.state in DISABLED_STATES
-                    self._steps.pop(0)
-                    continue
-                return                              # cycle() keeps sending "disable voltage"
-            self._steps.pop(0)
-            if kind == "nmt":
-                self._send(nmt_frame(step[1], self.node_id))
-                if step[1] == NmtCommand.START:
-                    self._nmt_start_sent_at = now
-            elif kind == "download":
-                _, index, sub, fmt, value = step
-                self.sdo.download(index, sub, struct.pack(fmt, value), now, tag=step)
-            elif kind == "upload":
-                self.sdo.upload(step[1], step[2], now, tag=step)
-            elif kind == "running":
-                self.phase = Phase.RUNNING
-                self.waiting_for_drive = False
-                self.heartbeat.arm(now)
-                self._event(INFO, f"drive {self.node_id} configured and started (NMT operational, "
-                                  f"SYNC every {self.settings.sync_period * 1e3:g} ms)")
-            elif kind == "stopped":
-                self.phase = Phase.STOPPED
-                self._event(INFO, "shutdown: drive disabled, NMT pre-operational" if self._shutdown_confirmed
-                            else "shutdown: NMT pre-operational, drive state not confirmed")
-
-    def _sdo_done(self, transfer: SdoTransfer, now: float) -> None:
-        tag = transfer.tag
-        if transfer.error is not None:
-            if not transfer.error.timed_out:
-                self.counters["sdo_aborts"] += 1
-            if self.phase is Phase.STARTING:
-                if transfer.error.timed_out and not self._startup_answered:
-                    self._wait_for_drive(now)
-                else:
-                    self._startup_failed(now, str(transfer.error))
-            elif self.phase is Phase.SHUTTING_DOWN:
-                self._event(WARN, f"shutdown: {transfer.error}")
-                self._advance(now)
-            else:
-                self._event(WARN, str(transfer.error))
-            return
-        if self.phase is Phase.STARTING:
-            self._startup_answered = True
-        if isinstance(tag, tuple) and tag and tag[0] == "error_code":
-            self._record_error_code(transfer)
-        elif isinstance(tag, tuple) and tag and tag[0] == "upload":
-            try:
-                tag[3](transfer)
-            except (SdoError, ValueError) as exc:
-                if self.phase is Phase.STARTING:
-                    self._startup_failed(now, str(exc))
-                    return
-                self._event(WARN, str(exc))
-        self._advance(now)
-
-    def _wait_for_drive(self, now: float) -> None:
-        """The drive does not answer at all (yet): not an error until it answers wrongly."""
-        if not self.waiting_for_drive:
-            self._event(WARN, f"drive {self.node_id} does not answer (yet): trying every "
-                              f"{self.settings.startup_retry:g} s")
-        self.waiting_for_drive = True
-        self.phase = Phase.FAILED
-        self._retry_at = now + self.settings.startup_retry
-        self._steps = []
-
-    def _startup_failed(self, now: float, reason: str) -> None:
-        self.waiting_for_drive = False
-        self.counters["startup_failures"] += 1
-        repeated = reason == self.startup_error
-        self.startup_error = reason
-        self.phase = Phase.FAILED
-        self._retry_at = now + self.settings.startup_retry
-        self._steps = []
-        if not repeated:
-            self._event(ERROR, f"drive start-up failed: {reason}; retrying every {self.settings.startup_retry:g} s")
-
-    def _check_device_type(self, transfer: SdoTransfer) -> None:
-        startup.check_device_type(self.node_id, transfer)
-
-    def _record_error_code(self, transfer: SdoTransfer) -> None:
-        code = transfer.value("<H")
-        if code:
-            self._set_fault(code)
-            self._event(WARN, f"drive reports error 0x{code:04X}: {self.status.fault_text}")
-
-    def _check_disabled(self, transfer: SdoTransfer) -> None:
-        state = eo.decode_statusword(transfer.value("<H"))
-        self._shutdown_confirmed = state in DISABLED_STATES
-        self._event(INFO if self._shutdown_confirmed else ERROR, f"shutdown: drive state {state.value}")
-
-    def _shutdown_cycle(self, now: float) -> None:
-        if self._steps and self._steps[0][0] == "pdo_disable":
-            self._send_rpdo(now, force=False)
-            self._sent_since_sync = None
-            if self._send(sync_frame()):
-                self.counters["sync_sent"] += 1
-        self._advance(now)
 
     def _event(self, level: int, text: str, key: str | None = None) -> None:
         """Queue a log line for the caller; with `key`, at most one a second of that kind."""
