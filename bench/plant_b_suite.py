@@ -31,7 +31,9 @@ MATCH = {
     "unsprung_toe_impact": ({"touchdown_loss_along": lambda m: m / (BODY_MASS + m)}, {"touchdown_along"}),
     "undulating_floor": ({"ground_height": None}, {"touchdown_along", "touchdown_timing"}),
     "backemf_torque_speed": ({"hip_viscous_friction": None, "torque_gain": None}, {"stance_hip"}),
-    "torque_deadband": ({"torque_offset": None, "hip_dry_friction": None, "torque_gain": None}, {"stance_hip"}),
+    # (the library's own dead band since issue 28: the same law, delta in N m)
+    "torque_deadband": ({"torque_dead_band": lambda m: m, "torque_offset": None, "hip_dry_friction": None,
+                         "torque_gain": None}, {"stance_hip"}),
     "harder_liftoff_collision": ({"liftoff_collision": lambda m: TOE_MASS + m}, {"liftoff_along", "liftoff_across"}),
     "z_sensor_scale": ({"z_scale": lambda m: 1 + m}, set()),
     "theta_sensor_delay": ({"theta_delay": lambda m: m}, set()),
@@ -45,8 +47,11 @@ MATCH = {
 }
 
 
-# plant-B mechanism -> the main parameter whose drift (`diagnosis.drift`) is that mechanism
+# plant-B mechanism -> the main parameter whose drift (`diagnosis.drift`) is that mechanism, and the library entry
+# that holds the same parameter's level beside the trend (part of the same finding, not a verdict of its own)
 DRIFTS = {"spring_stiffness_drift": "stiffness"}
+DRIFT_LEVEL = {"stiffness": "leg_stiffness", "damping": "leg_damping", "gravity": "effective_gravity",
+               "rest_length": "rest_length"}
 
 
 def score(result, truth: dict) -> dict:
@@ -64,6 +69,7 @@ def score(result, truth: dict) -> dict:
                 want = float(effect["magnitude"])
                 if abs(drift.change_pct / 100.0 - want) <= 0.25 * abs(want):
                     drifts_used.add(k)
+                    used.update(j for j, r in enumerate(result.chosen) if r.name == DRIFT_LEVEL[drift.parameter])
                     by_mechanism.append(effect["id"])
                     found = (None, f"drift of {drift.parameter} {drift.change_pct:+.1f} % (true {100 * want:+.1f} %)")
         for k, r in enumerate(result.chosen):
