@@ -31,9 +31,7 @@ MATCH = {
     "unsprung_toe_impact": ({"touchdown_loss_along": lambda m: m / (BODY_MASS + m)}, {"touchdown_along"}),
     "undulating_floor": ({"ground_height": None}, {"touchdown_along", "touchdown_timing"}),
     "backemf_torque_speed": ({"hip_viscous_friction": None, "torque_gain": None}, {"stance_hip"}),
-    # (the library's own dead band since issue 28: the same law, delta in N m)
-    "torque_deadband": ({"torque_dead_band": lambda m: m, "torque_offset": None, "hip_dry_friction": None,
-                         "torque_gain": None}, {"stance_hip"}),
+    "torque_deadband": ({"torque_offset": None, "hip_dry_friction": None, "torque_gain": None}, {"stance_hip"}),
     "harder_liftoff_collision": ({"liftoff_collision": lambda m: TOE_MASS + m}, {"liftoff_along", "liftoff_across"}),
     "z_sensor_scale": ({"z_scale": lambda m: 1 + m}, set()),
     "theta_sensor_delay": ({"theta_delay": lambda m: m}, set()),

@@ -213,10 +213,6 @@ LIBRARY: tuple[Effect, ...] = (
     _e("torque_saturation", "actuator", "actuator", "hip",
        Parameter("tau_max", "N m", 0.0, 0.6, "torque_limit", inverse=True, resolved=("command", 0.3, 1.0)),
        "|tau| <= tau_max", "the hip torque is clipped", TORQUES),
-    _e("torque_dead_band", "actuator", "actuator", "hip",
-       Parameter("delta", "N m", 0.0, 1.5, "torque_dead_band"),
-       "tau = sign(tau_cmd) max(|tau_cmd| - delta, 0)", "the drive loses the first delta of every command (a "
-       "dead band: small commands give no torque)", TORQUES),
     _e("hip_inertia", "actuator", "stance_hip", "hip",
        Parameter("J", "kg m^2", 0.0, 0.03, "hip_inertia"),
        "tau_body = (tau + J (2 rho' theta' - g sin theta)/rho) / (1 + J/(m rho^2)); v_across+ = v_across- / "

@@ -93,7 +93,6 @@ class Coefficients:
     torque_delay: object = 0.0              # [s] command -> torque
     torque_lag: object = 0.0                # [s] first-order time constant
     torque_limit: object = math.inf         # [N m] |tau| <= limit
-    torque_dead_band: object = 0.0          # [N m] the first delta of every command is lost
     hip_inertia: object = 0.0               # J [kg m^2] of the leg and the motor's rotor (through the gear) about
     #                                         the hip: turned by the hip torque in stance, spun up at touchdown
     hip_viscous: object = 0.0               # [N m s/rad] - b theta'
@@ -157,7 +156,7 @@ def active(c: Coefficients) -> frozenset:
 # `*_terms` field where any of its coefficients is not 0
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "spring_cubic", "spring_preload",
          "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness", "boom_friction",
-         "torque_dead_band", "hip_inertia")
+         "hip_inertia")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -323,12 +322,10 @@ def toe_slip_rate(c: Coefficients, stuck_force, across, sin, cos):
 
 
 def actuator_torque(c: Coefficients, command):
-    """Torque the hip delivers for a commanded torque (before any lag): dead band, gain, offset, saturation.
+    """Torque the hip delivers for a commanded torque (before any lag): gain, offset, saturation.
 
     The delay and the first-order lag act in time (the integrators: `torque_delay`, `torque_lag`).
     """
-    if is_on(c, "torque_dead_band"):
-        command = np.sign(command) * np.maximum(np.abs(command) - c.torque_dead_band, 0.0)
     return clip(c.torque_gain * command + c.torque_offset, -c.torque_limit, c.torque_limit)
 
 
