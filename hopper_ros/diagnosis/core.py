@@ -26,7 +26,7 @@ from .drift import find_drift
 from .locate import Location, fit_locations, locate
 from .lookalikes import discovered_look_alikes, fit_secondary
 from .progress import QUIET, Progress
-from .records import Completeness, Diagnosis, Errors, Reference, Scored, completeness
+from .records import Diagnosis, Errors, Reference, Scored, completeness
 from .report import verdict
 from .rounds import Log, restarts, rounds
 from .search import Search
