@@ -162,7 +162,7 @@ class Completeness:
     def words(self) -> str:
         ratios = "/".join(f"{self.over_floor[k]:.1f}" for k in APEX_ERRORS)
         if self.path_only:
-            return (("explained" if self.explained else f"partly explained, at {self.site}")
+            return (("explained" if self.explained else f"partly explained, at {self.site or 'the next apex'}")
                     + "; it changes the path between apexes, not the next apex (the model's held-out next apexes "
                     "are at the noise floor)")
         if self.explained:
