@@ -19,9 +19,7 @@ NOMINAL = {"d_v": 0.23, "d_h": 0.01, "k": 4696.0, "rho_0": 0.205}
 # plant effect id -> (library entry, magnitude in the entry's unit from the plant's magnitude)
 LIBRARY_MATCH = {
     "air_drag_quadratic": ("quadratic_drag", lambda m: m),
-    # the plant's bearing friction acts in flight only: the library's flight-only law, or its law of the same bearing
-    # in every phase (issue 28 point 4; on this plant it fits 13 % lower, the stance's share of the strides)
-    "boom_bearing_coulomb": (("boom_friction_horizontal", "boom_bearing_friction"), lambda m: m),
+    "boom_bearing_coulomb": ("boom_friction_horizontal", lambda m: m),
     "flight_damping_vertical_extra": ("flight_damping_vertical", lambda m: NOMINAL["d_v"] + m),
     "flight_damping_horizontal_extra": ("flight_damping_horizontal", lambda m: NOMINAL["d_h"] + m),
     "effective_gravity": ("effective_gravity", lambda m: m),

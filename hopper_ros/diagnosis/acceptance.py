@@ -8,8 +8,6 @@ import math
 
 import numpy as np
 
-from hopper_ros.physics.terms import PRODUCT_TERMS
-
 from .data import StrideData
 from .records import APEX_ERRORS, Errors, Reference, Scored
 from .settings import Settings
@@ -113,8 +111,7 @@ def choose(ranking: list[Scored], settings: Settings) -> tuple[Scored | None, li
             r.significant, r.margin_only = False, True
             r.rejected.append("a physics effect explains the same residual about as well")
         if c.kind == "discovered" and best_library is not None and \
-                r.reduction < best_library.reduction + settings.discovery_margin * r.reduction and \
-                not (_a_product(c) and beats(r, best_library, settings.discovery_margin, settings)):
+                r.reduction < best_library.reduction + settings.discovery_margin * r.reduction:
             r.significant, r.margin_only = False, True
             r.rejected.append("a library effect explains it about as well")
     ok = [r for r in ranking if r.significant]
@@ -124,19 +121,12 @@ def choose(ranking: list[Scored], settings: Settings) -> tuple[Scored | None, li
     return top, [r for r in passed if r is not top and look_alike(r, top, settings)]
 
 
-def _a_product(candidate) -> bool:
-    """A discovered term set using a product of two of the model's variables (`terms.PRODUCT_TERMS`): no library
-    entry is that law, so it may beat one by leaving much less near a full reduction, as a sensor fault may."""
-    return candidate.discovery is not None and any(key in PRODUCT_TERMS for key, *_ in candidate.discovery.terms())
-
-
 def beats(r: Scored, rival: Scored | None, margin: float, settings: Settings) -> bool:
     """A sensor fault `r` beats the best physics effect `rival` by a margin: its reduction by `margin` of its own,
     or (near a full reduction, `near_full`, where reductions differ little) it leaves at most `margin_residual` of
     what the rival leaves on held-out strides, consistently over strides (paired t >= min_t). A discovered term set
     against a library entry has only the first: the same law written as terms (a constant force where the
-    speed never changes sign) can fit closer than the entry's grid, and the entry's name is the answer; unless
-    it uses a product term (`_a_product`)."""
+    speed never changes sign) can fit closer than the entry's grid, and the entry's name is the answer."""
     if rival is None or r.reduction >= rival.reduction + margin * r.reduction:
         return True
     return bool(r.reduction >= settings.near_full

@@ -139,11 +139,6 @@ LIBRARY: tuple[Effect, ...] = (
     _e("effective_gravity", "boom", "flight", "vertical",
        Parameter("g", "m/s^2", 0.75, 1.25, "gravity", relative=True),
        "z'' = -g ...  (4.5)-(4.7)", "the effective gravity of the boom differs from the model's", HEIGHTS),
-    _e("boom_bearing_friction", "boom", "flight", "horizontal",
-       Parameter("a_b", "m/s^2", 0.0, 1.5, "boom_friction"),
-       "y'' += -a_b sign(y') in flight and stance", "dry friction of the boom's vertical bearing, which turns in "
-       "every phase (against boom_friction_horizontal: in flight only)", "strides with long and short stances at "
-       "the same speed (a flight-only friction does not act in stance)"),
     _e("horizontal_inertia", "boom", "stance_leg", "horizontal",
        Parameter("r", "", 0.0, 0.6, "horizontal_mass_ratio"),
        "m_b (1 + r) y'' = F_y in stance", "the boom's inertia makes the horizontal effective mass larger than the "
@@ -213,11 +208,6 @@ LIBRARY: tuple[Effect, ...] = (
     _e("torque_saturation", "actuator", "actuator", "hip",
        Parameter("tau_max", "N m", 0.0, 0.6, "torque_limit", inverse=True, resolved=("command", 0.3, 1.0)),
        "|tau| <= tau_max", "the hip torque is clipped", TORQUES),
-    _e("hip_inertia", "actuator", "stance_hip", "hip",
-       Parameter("J", "kg m^2", 0.0, 0.03, "hip_inertia"),
-       "tau_body = (tau + J (2 rho' theta' - g sin theta)/rho) / (1 + J/(m rho^2)); v_across+ = v_across- / "
-       "(1 + J/(m rho_0^2))", "the leg and the motor's rotor through the gear have inertia about the hip: part of the "
-       "hip torque turns them in stance, and the still leg is spun up at touchdown", SPEEDS),
     _e("hip_viscous_friction", "actuator", "stance_hip", "hip",
        Parameter("b", "N m s/rad", 0.0, 0.3, "hip_viscous"),
        "tau += -b theta'", "viscous friction in the hip joint", SPEEDS),

@@ -73,8 +73,6 @@ class Coefficients:
     flight_friction_y: object = 0.0         # [m/s^2] dry friction of the boom about its vertical axis
     flight_friction_z: object = 0.0         # [m/s^2] ... about its horizontal axis
     horizontal_mass_ratio: object = 0.0     # r: horizontal effective mass m_b (1 + r) (the boom's inertia)
-    boom_friction: object = 0.0             # [m/s^2] dry friction of the boom's bearing about its vertical axis,
-    #                                         acting on the forward motion in every phase
     # touchdown
     touchdown_loss_along: object = 0.0      # share of the velocity along the leg lost at touchdown
     touchdown_loss_across: object = 0.0     # share of the velocity across the leg lost at touchdown
@@ -93,8 +91,6 @@ class Coefficients:
     torque_delay: object = 0.0              # [s] command -> torque
     torque_lag: object = 0.0                # [s] first-order time constant
     torque_limit: object = math.inf         # [N m] |tau| <= limit
-    hip_inertia: object = 0.0               # J [kg m^2] of the leg and the motor's rotor (through the gear) about
-    #                                         the hip: turned by the hip torque in stance, spun up at touchdown
     hip_viscous: object = 0.0               # [N m s/rad] - b theta'
     hip_friction: object = 0.0              # [N m] - f tanh(theta'/w_s)
     # discovered terms (coefficients of the term libraries of physics.terms)
@@ -155,8 +151,7 @@ def active(c: Coefficients) -> frozenset:
 # the coefficients whose law is skipped where they are 0 (`is_on`); ground_friction is on where finite, and a
 # `*_terms` field where any of its coefficients is not 0
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "spring_cubic", "spring_preload",
-         "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness", "boom_friction",
-         "hip_inertia")
+         "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -181,8 +176,6 @@ def flight_acceleration(c: Coefficients, y, z, ydot, zdot):
         ay = ay - c.flight_friction_y * smooth_sign(ydot)
     if is_on(c, "flight_friction_z"):
         az = az - c.flight_friction_z * smooth_sign(zdot)
-    if is_on(c, "boom_friction"):
-        ay = ay - c.boom_friction * smooth_sign(ydot)
     if is_on(c, "flight_y_terms") or is_on(c, "flight_z_terms"):
         context = FlightContext(y, z, ydot, zdot, c.flight_z_knot)
         ay = ay + sum_terms(flight_y_term, c.flight_y_terms, context) / c.mass
@@ -246,12 +239,9 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
         m z'' =  F e_rho,z + (tau/rho) e_theta,z - m g
 
     F is `leg_force` plus the discovered along-the-leg terms, tau the applied torque plus `hip_losses` and
-    the discovered hip terms, r the horizontal mass ratio of the boom. A leg with inertia J about the hip takes
-    J theta'' of that torque: with m (rho theta'' + 2 rho' theta') = tau/rho + m g sin(theta) (the body across the
-    leg), the torque that reaches the body is (tau + J (2 rho' theta' - g sin theta)/rho) / (1 + J/(m rho^2)).
-    A compliant ground holds the massless toe with k_g depth + d_g depth' = the force's vertical component;
-    depth' enters rho'. On a ground of finite friction the toe slides (`toe_slip_rate`); its speed enters rho'
-    the same way.
+    the discovered hip terms, r the horizontal mass ratio of the boom. A compliant ground holds the
+    massless toe with k_g depth + d_g depth' = the force's vertical component; depth' enters rho'. On a
+    ground of finite friction the toe slides (`toe_slip_rate`); its speed enters rho' the same way.
     `compliant` (per lane) defaults to ground_stiffness > 0.
     """
     dy = y - toe_y
@@ -266,9 +256,6 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
         hip_context = stance_context(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown,
                                      torque, command, 0.0)
         tau = tau + sum_terms(hip_term, c.hip_terms, hip_context)
-    if is_on(c, "hip_inertia"):
-        tau = (tau + c.hip_inertia * (2.0 * approach * theta_dot - c.gravity * sin) / rho) \
-            / (1.0 + c.hip_inertia / (c.mass * rho * rho))
     spring_only = leg_force(c, rho, approach) + c.damping * approach     # the force's parts without d rho'
     if is_on(c, "leg_terms"):
         leg_context = stance_context(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown,
@@ -287,8 +274,6 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
         rho_dot = rho_dot + sin * toe_rate
     force = spring_only - c.damping * rho_dot
     ydd = (-force * sin - across * cos) / (c.mass * (1.0 + c.horizontal_mass_ratio))
-    if is_on(c, "boom_friction"):      # the boom's bearing turns in stance as in flight
-        ydd = ydd - c.boom_friction * smooth_sign(ydot) / (1.0 + c.horizontal_mass_ratio)
     zdd = (force * cos - across * sin) / c.mass - c.gravity
     return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, toe_rate, ydd, zdd)
 
@@ -352,8 +337,6 @@ def touchdown_velocity(c: Coefficients, theta, ydot, zdot):
     context = JumpContext(along, across)
     new_along = along * (1.0 - c.touchdown_loss_along)
     new_across = across * (1.0 - c.touchdown_loss_across)
-    if is_on(c, "hip_inertia"):      # the still leg spun up by the body's motion across it: J theta' = impulse rho_0
-        new_across = new_across / (1.0 + c.hip_inertia / (c.mass * c.rest_length * c.rest_length))
     if is_on(c, "touchdown_along_terms"):
         new_along = new_along + sum_terms(jump_term, c.touchdown_along_terms, context)
     if is_on(c, "touchdown_across_terms"):

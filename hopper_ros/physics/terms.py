@@ -73,9 +73,7 @@ def leg_term(i, c):
         return c.since_touchdown
     if i == 9:
         return c.torque / c.rho
-    if i == 10:
-        return np.maximum(c.compression - c.knot, 0.0)
-    return -c.compression * c.rho_dot
+    return np.maximum(c.compression - c.knot, 0.0)
 
 
 def hip_term(i, c):
@@ -94,9 +92,7 @@ def hip_term(i, c):
         return -smooth_sign(c.theta_dot)
     if i == 6:
         return c.since_touchdown
-    if i == 7:
-        return c.compression
-    return c.command * np.abs(c.theta_dot)
+    return c.compression
 
 
 def jump_term(i, c):
@@ -140,8 +136,6 @@ LEG_TERMS = TermLibrary((
     ("t", "a force growing with the time since touchdown", "N/s"),
     ("tau/rho", "a force along the leg proportional to the hip torque over the leg length", "1"),
     ("x>x_k", "a force proportional to the compression beyond x_k (a stop or a second spring that engages)", "N/m"),
-    ("x rho'", "a force proportional to the compression times the extension rate (damping that grows with the "
-     "compression)", "N s/m^2"),
 ), leg_term)
 # the term whose break point (knot) is chosen from the data, per library: (term key, Coefficients field of its knot)
 HINGES = {"flight_z": ("z>z_k", "flight_z_knot"), "leg": ("x>x_k", "leg_knot")}
@@ -155,18 +149,12 @@ HIP_TERMS = TermLibrary((
     ("sign(theta')", "a constant torque against the leg's rotation (dry friction at the hip)", "N m"),
     ("t", "a torque growing with the time since touchdown", "N m/s"),
     ("x", "a torque proportional to the leg's compression", "N"),
-    ("tau|theta'|", "a torque proportional to the commanded torque times the leg's angular speed (negative: the "
-     "motor's torque falls with its speed, a torque-speed line)", "s/rad"),
 ), hip_term)
 JUMP_TERMS = TermLibrary((
     ("1", "a constant velocity change", "m/s"),
     ("v_along", "a share of the velocity along the leg", "1"),
     ("v_across", "a share of the velocity across the leg", "1"),
 ), jump_term)
-# terms that are products of two of the model's variables (issue 28, point 3): no library entry's law has one, so a
-# discovered set using one is never the same law as an entry written as terms (diagnosis.acceptance)
-PRODUCT_TERMS = ("x rho'", "tau|theta'|")
-
 TERM_LIBRARIES = {"flight_y": FLIGHT_Y_TERMS, "flight_z": FLIGHT_Z_TERMS, "leg": LEG_TERMS, "hip": HIP_TERMS,
                   "touchdown_along": JUMP_TERMS, "touchdown_across": JUMP_TERMS,
                   "liftoff_along": JUMP_TERMS, "liftoff_across": JUMP_TERMS}
