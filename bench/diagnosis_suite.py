@@ -81,14 +81,13 @@ def score(result, truth: dict, threshold: float) -> dict:
         name, magnitude = _expected(effect)
         right_sites = set(effect["located_sites"]) if "located_sites" in effect else SITES.get(effect["site"], set())
         found = None
-        wanted = {name} if isinstance(name, str) else set(name or ())
         for k, r in enumerate(verdicts):
             c = r.candidate
-            options = [r] + list(r.ties)
-            match = next((o for o in options if o.candidate.name in wanted), None)
-            if match is not None:
-                if abs(match.magnitude - magnitude) <= TOLERANCE * abs(magnitude):
-                    found = (k, f"{match.candidate.name} {match.magnitude:.4g} (true {magnitude:.4g})")
+            names = {c.name, *(t.name for t in r.ties)}
+            if name is not None and name in names:
+                mag = r.magnitude if c.name == name else next(t.magnitude for t in r.ties if t.name == name)
+                if abs(mag - magnitude) <= TOLERANCE * abs(magnitude):
+                    found = (k, f"{name} {mag:.4g} (true {magnitude:.4g})")
                     break
             if name is None:   # an effect no entry models: terms discovered where it acts (or among the look-alikes)
                 options = [r] + list(r.ties)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hopper_ros.identification.strides import APEX_ERRORS, ExtractionSettings
+from hopper_ros.identification.strides import APEX_FIT_FIELDS, ExtractionSettings
 
 from .data import PHASES, StrideData
 from .locate import Location, trajectory_location
@@ -34,7 +34,7 @@ def start_errors(data: StrideData) -> dict[str, tuple[np.ndarray, dict]]:
     s = data.strides
     out = {}
     if s.apex_errors is not None and len(s.apex_errors) == len(s):
-        for k, name in enumerate(APEX_ERRORS):
+        for k, name in enumerate(APEX_FIT_FIELDS):
             out[name] = (s.apex_errors[:, k], {name: getattr(s, name) + s.apex_errors[:, k]})
     # the held touchdown angle: the median of a still leg's samples, within one quantum of the truth
     q, sigma = data.quantum["theta"], data.sigma["theta"]
@@ -104,7 +104,7 @@ def noise_floor(data: StrideData, moves: list[StartMove], draws: int = 64, seed:
         for key in variance:
             variance[key] = variance[key] + move.pred[key] ** 2
     errors = {name: (s.apex_errors[:, k] if s.apex_errors is not None else np.zeros(len(s)))
-              for k, name in enumerate(APEX_ERRORS)}
+              for k, name in enumerate(APEX_FIT_FIELDS)}
     variance["height"] = variance["height"] + errors["apex_height"] ** 2
     variance["length"] = variance["length"] + 2 * errors["apex_y"] ** 2
     variance["speed"] = variance["speed"] + errors["forward_speed"] ** 2

@@ -63,7 +63,7 @@ class ExtractionSettings:
         return cls(**{k: type(getattr(cls, k))(v) for k, v in (values or {}).items()})
 
 
-APEX_ERRORS = ("apex_height", "apex_time", "apex_y", "forward_speed")   # Strides.apex_errors' columns
+APEX_FIT_FIELDS = ("apex_height", "apex_time", "apex_y", "forward_speed")   # Strides.apex_errors' columns
 _STRIDE_FIELDS = ("apex_height", "forward_speed", "touchdown_angle", "tau_0", "ramp_duration",
                   "next_apex_height", "next_forward_speed", "stride_length", "stride_time",
                   "apex_time", "apex_y", "touchdown_time", "bottom_time", "liftoff_time", "next_apex_time",
@@ -97,7 +97,7 @@ class Strides:
     rejected: list = field(default_factory=list)    # (time [s], reason)
     phase: np.ndarray | None = None                 # phase label of every sample of the recording
     labelled: bool = False                          # phases from labels (True) or detected
-    # per stride, the standard errors of the opening apex's fits (APEX_ERRORS columns), from their own residuals
+    # per stride, the standard errors of the opening apex's fits (APEX_FIT_FIELDS columns), from their own residuals
     apex_errors: np.ndarray | None = None
 
     def __len__(self) -> int:
@@ -190,7 +190,7 @@ def extract_strides(recording: Recording, rest_length: float, settings: Extracti
         out = Strides(*(np.asarray(c, dtype=float) for c in columns[:-2]),
                       np.asarray(columns[-2], dtype=int), np.asarray(columns[-1], dtype=int))
     out.rejected, out.phase, out.labelled = rejected, phase_out, bool(labelled)
-    out.apex_errors = np.asarray(errors, dtype=float).reshape(len(rows), len(APEX_ERRORS))
+    out.apex_errors = np.asarray(errors, dtype=float).reshape(len(rows), len(APEX_FIT_FIELDS))
     return out
 
 
@@ -277,7 +277,7 @@ def _event_time(rec: Recording, kind: int, before: float, after: float) -> float
 
 
 def _apex(t, y, z, a: int, b: int, s: ExtractionSettings, period: float):
-    """(time, height, y, forward speed, their standard errors in APEX_ERRORS order) of the apex of flight
+    """(time, height, y, forward speed, their standard errors in APEX_FIT_FIELDS order) of the apex of flight
     [a, b), or None."""
     guard = int(math.ceil(s.edge_guard / period))
     lo = a + (guard if a > 0 else 0)
