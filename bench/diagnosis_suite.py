@@ -170,14 +170,29 @@ def run(folder: Path, names=None, verbose=True) -> dict:
     """Diagnose every recording of `folder` (CSV + truth JSON) and sum the scores."""
     rows = []
     for truth_path in sorted(folder.glob("*.json")):
-        if names and truth_path.stem not in names:
+        if names and truth_path.stem not in names or truth_path.stem == "score":
             continue
         truth = json.loads(truth_path.read_text())
         rows.append(diagnose_and_score(truth_path.stem, truth_path.with_suffix(".csv"), truth, verbose))
     return summarise(rows)
 
 
+def suite(score, summarise, line):
+    """The `run(folder, names=None, verbose=True)` of a blind plant's scorer: `score_folder` then `summarise`."""
+    def run(folder: Path, names=None, verbose: bool = True) -> dict:
+        return summarise(score_folder(folder, names, score, line, verbose))
+    return run
+
+
+def main(run, argv: list[str]) -> None:
+    """`SCORER FOLDER [NAME ...]`: `run`'s summary printed (rows left out) and kept in FOLDER/score.json."""
+    if len(argv) < 2 or not Path(argv[1]).is_dir():
+        raise SystemExit(f"usage: {Path(argv[0]).name} FOLDER [NAME ...]  (FOLDER: a suite's recordings)")
+    summary = run(Path(argv[1]), argv[2:] or None)
+    print(json.dumps({k: v for k, v in summary.items() if k != "rows"}, indent=1))
+    (Path(argv[1]) / "score.json").write_text(json.dumps(summary, indent=1, default=str))
+
+
 if __name__ == "__main__":
     sys.path.insert(0, str(REPO / "test"))
-    summary = run(Path(sys.argv[1]), sys.argv[2:] or None)
-    print(json.dumps({k: v for k, v in summary.items() if k != "rows"}, indent=1))
+    main(run, sys.argv)

@@ -11,11 +11,10 @@ discovered where it acts. A verdict matching no concealed effect is a false posi
 
 from __future__ import annotations
 
-import json
 import sys
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
+from diagnosis_suite import main, suite, summarise  # bench/ is on sys.path
+
 G, TOE_MASS, BODY_MASS = 11.42, 0.03, 2.20       # config/model.yaml, the plant's nominal model
 
 
@@ -102,15 +101,9 @@ def score(result, truth: dict) -> dict:
             "flagged": bool(result.chosen or result.drifts) or result.verdict != "no significant mismatch"}
 
 
-def run(folder: Path, names=None, verbose: bool = True) -> dict:
-    from diagnosis_suite import score_folder, summarise
-
-    return summarise(score_folder(folder, names, score, lambda s: (
-        f"{s['name']}: {len(s['hits'])}/{s['effects']} {s['hits']} missed {s['misses']} false "
-        f"{s['false_positives']}, {s['seconds']:.0f} s | {s['verdict']}"), verbose))
-
+run = suite(score, summarise, lambda s: (
+    f"{s['name']}: {len(s['hits'])}/{s['effects']} {s['hits']} missed {s['misses']} false "
+    f"{s['false_positives']}, {s['seconds']:.0f} s | {s['verdict']}"))
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(REPO / "bench"))
-    summary = run(Path(sys.argv[1]), sys.argv[2:] or None)
-    print(json.dumps({k: v for k, v in summary.items() if k != "rows"}, indent=1))
+    main(run, sys.argv)

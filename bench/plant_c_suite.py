@@ -16,11 +16,10 @@ score and is not tuned to it.
 
 from __future__ import annotations
 
-import json
 import sys
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
+from diagnosis_suite import main, suite  # bench/ is on sys.path
+
 
 # plant-C mechanism -> (library entries that are a look-alike of its law, discovered sites where it acts)
 NEAR = {
@@ -95,16 +94,9 @@ def summarise(rows: list[dict]) -> dict:
             "recordings": len(rows), "effects": effects, "rows": rows}
 
 
-def run(folder: Path, names=None, verbose: bool = True) -> dict:
-    from diagnosis_suite import score_folder
-
-    return summarise(score_folder(folder, names, score, lambda s: (
-        f"{s['name']}: mechanism {s['by_mechanism']} alike {s['alike']} missed {s['misses']} false "
-        f"{s['false_verdicts']}, {s['seconds']:.0f} s | {s['verdict']}"), verbose))
-
+run = suite(score, summarise, lambda s: (
+    f"{s['name']}: mechanism {s['by_mechanism']} alike {s['alike']} missed {s['misses']} false "
+    f"{s['false_verdicts']}, {s['seconds']:.0f} s | {s['verdict']}"))
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(REPO / "bench"))
-    summary = run(Path(sys.argv[1]), sys.argv[2:] or None)
-    print(json.dumps({k: v for k, v in summary.items() if k != "rows"}, indent=1))
-    (Path(sys.argv[1]) / "score.json").write_text(json.dumps(summary, indent=1, default=str))
+    main(run, sys.argv)

@@ -215,3 +215,10 @@ def process_alive(pid: int) -> bool:
     except OSError:
         return False
     return stat[stat.rfind(b")") + 2 :].split()[0] not in (b"Z", b"X")
+
+
+def run_without_numba(script: str) -> subprocess.CompletedProcess:
+    """`script` run by this interpreter in the repository with numba unimportable (the numpy path)."""
+    return subprocess.run([sys.executable, "-c", "import sys; sys.modules['numba'] = None\n" + script],
+                          capture_output=True, text=True, cwd=REPO, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})

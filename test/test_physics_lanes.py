@@ -5,18 +5,13 @@ ground, actuator lag, hip friction, toe slip) run as lanes of one call on each p
 differ from numpy's only by rounding. Without numba the numpy path runs and says so once.
 """
 
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from conftest import run_without_numba
 from hopper_ros.physics import effects, lanes, laws
 from hopper_ros.physics.params import load_params
 
-REPO = Path(__file__).resolve().parent.parent
 PARAMS = load_params()
 STRIDES = ((0.35, 2.0, 0.35, 5.0, 0.07), (0.40, 1.5, 0.30, 2.0, 0.08), (0.32, 2.2, 0.38, -1.0, 0.07),
            (0.30, 1.0, 0.20, 8.0, 0.10))
@@ -71,16 +66,14 @@ def test_compiled_path_is_required_when_asked(monkeypatch):
 
 
 def test_without_numba_the_numpy_path_runs_and_says_so_once():
-    script = ("import sys; sys.modules['numba'] = None\n"
-              "import numpy as np\n"
+    script = ("import numpy as np\n"
               "from hopper_ros.physics import lanes, laws\n"
               "from hopper_ros.physics.params import load_params\n"
               "c = laws.Coefficients.from_model(load_params())\n"
               "for _ in range(3):\n"
               "    r = lanes.simulate_lanes(c, np.array([0.35, 0.4]), 2.0, 0.35, 5.0, 0.07, duration=0.5)\n"
               "print(repr(float(r.next_apex_height[0])))\n")
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=REPO, timeout=120,
-                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    done = run_without_numba(script)
     assert done.returncode == 0, done.stderr
     said = [line for line in done.stderr.splitlines() if "compiled lanes are not available" in line]
     assert len(said) == 1, done.stderr

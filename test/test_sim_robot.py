@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import math
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import run_without_numba
 from hopper_ros.config import load_yaml
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.hardware.config import load_hardware
@@ -24,7 +21,6 @@ from hopper_ros.sim.experiment import ExperimentSeries, StrideExperiment, drive_
 from hopper_ros.sim.plant import Plant
 from hopper_ros.sim.robot import SimRobot
 
-REPO = Path(__file__).resolve().parent.parent
 HARDWARE = load_hardware()
 BASE = load_sim_config()
 # the extended TD-SLIP model's own terms, each taken out of the physics
@@ -200,16 +196,14 @@ def test_the_compiled_plant_and_the_python_plant_give_the_same_strides():
 
 
 def test_without_numba_the_plant_runs_in_python():
-    script = ("import sys; sys.modules['numba'] = None\n"
-              "from hopper_ros.hardware.config import load_hardware\n"
+    script = ("from hopper_ros.hardware.config import load_hardware\n"
               "from hopper_ros.sim.config import load_sim_config\n"
               "from hopper_ros.sim.robot import SimRobot\n"
               "robot = SimRobot(load_sim_config(), load_hardware())\n"
               "robot.throw(0.4, 2.0, 0.3)\n"
               "samples = robot.run_until(lambda s: any(e.kind == 'touchdown' for e in s.events), 1.0)\n"
               "print(robot.plant.kernel.compiled, samples[-1].events[0].kind)\n")
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=REPO, timeout=120,
-                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    done = run_without_numba(script)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["False", "touchdown"]
 
