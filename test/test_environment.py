@@ -156,18 +156,29 @@ def test_a_bad_realtime_priority_is_refused(value):
             apply_realtime_priority(env)
 
 
+@pytest.mark.parametrize("value", ["-1", "first", "1.5"])
+def test_a_bad_cpu_index_is_refused(value):
+    from hopper_ros.runtime.environment import CPU_VAR, apply_cpu_affinity
+
+    with pytest.raises(RosEnvironmentError, match="must be a CPU index >= 0"):
+        apply_cpu_affinity({CPU_VAR: value})
+    assert apply_cpu_affinity({}) == "any CPU"
+
+
 def test_a_node_asked_for_realtime_priority_runs_every_thread_on_sched_fifo(hopper_cli):
+    """... and pinned, every thread, to the CPU HOPPER_CPU names (the index among the allowed CPUs)."""
     import socket
 
     from conftest import free_port
-    from hopper_ros.runtime.environment import REALTIME_PRIORITY_VAR
+    from hopper_ros.runtime.environment import CPU_VAR, REALTIME_PRIORITY_VAR
 
+    allowed = sorted(os.sched_getaffinity(0))
     rt = hopper_cli("run", "encoder_bridge", "--ros-args", "-p", f"port:={free_port(socket.SOCK_DGRAM)}",
-                    env={REALTIME_PRIORITY_VAR: "7"})
+                    env={REALTIME_PRIORITY_VAR: "7", CPU_VAR: "1"})
     normal = hopper_cli("run", "encoder_bridge", "--ros-args", "-p", f"port:={free_port(socket.SOCK_DGRAM)}",
-                        unset=(REALTIME_PRIORITY_VAR,))
+                        unset=(REALTIME_PRIORITY_VAR, CPU_VAR))
     line = rt.wait_for_line(r"scheduling: (.*)").group(1)
-    normal.wait_for_line(r"scheduling: normal scheduling")
+    normal.wait_for_line(r"scheduling: normal scheduling, any CPU")
     if "refused" in line:
         pytest.skip(f"this machine gives no SCHED_FIFO: {line}")
     assert "SCHED_FIFO priority 7" in line
@@ -176,6 +187,11 @@ def test_a_node_asked_for_realtime_priority_runs_every_thread_on_sched_fifo(hopp
     assert _policies(rt_pid) == {os.SCHED_FIFO}          # the DDS threads and the UDP thread too
     assert os.sched_getparam(rt_pid).sched_priority == 7
     assert _policies(normal_pid) == {os.SCHED_OTHER}
+    if len(allowed) > 1:
+        assert line.endswith(f"CPU {allowed[1]}")
+        assert {frozenset(os.sched_getaffinity(int(tid))) for tid in os.listdir(f"/proc/{rt_pid}/task")} == \
+            {frozenset({allowed[1]})}
+        assert os.sched_getaffinity(normal_pid) == set(allowed)
     rt.signal(signal.SIGINT)
     normal.signal(signal.SIGINT)
     assert rt.wait() == 0 and normal.wait() == 0

@@ -19,7 +19,8 @@ from typing import Any, Mapping
 import yaml
 
 from hopper_ros.config import config_path, launch_dir, package_share_dir
-from hopper_ros.runtime.environment import REALTIME_PRIORITY_VAR, RosEnvironmentError, apply_ros_environment, realtime_priority
+from hopper_ros.runtime.environment import (REALTIME_PRIORITY_VAR, RosEnvironmentError, apply_ros_environment, cpu_index,
+                                            realtime_priority)
 
 from .supervisor import DEFAULT_SIGINT_TIMEOUT, DEFAULT_SIGTERM_TIMEOUT, ChildSpec
 
@@ -359,6 +360,7 @@ def _node(context: _Context, entity: dict, where: str, env: dict[str, str],
             child_env[_string(context, item, "name", where, True)] = _string(context, item, "value", where) or ""
         try:
             realtime_priority(child_env)
+            cpu_index(child_env)
         except RosEnvironmentError as exc:
             raise LaunchFileError(f"{where}: {exc}") from None
     spec = ChildSpec(labels[0], node_command(executable, ros_args, extra), child_env, respawn=respawn,

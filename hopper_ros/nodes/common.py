@@ -31,8 +31,8 @@ import time
 import traceback
 from typing import Any, Callable, Sequence
 
-from hopper_ros.runtime.environment import (RosEnvironmentError, apply_realtime_priority, apply_ros_environment,
-                                    dds_network, realtime_priority)
+from hopper_ros.runtime.environment import (RosEnvironmentError, apply_cpu_affinity, apply_realtime_priority,
+                                    apply_ros_environment, cpu_index, dds_network, realtime_priority)
 from hopper_ros.nodes.signals import StopSignals
 
 _SPIN_PERIOD = 1.0  # [s] the executor wakes at least this often (belt and braces, see StopSignals)
@@ -142,6 +142,7 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
     try:
         apply_ros_environment()
         realtime_priority()          # checked now; applied once the node is built (below)
+        cpu_index()
     except RosEnvironmentError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -180,7 +181,7 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
             # SCHED_FIFO only now, for every thread there (rclpy's, DDS's, the node's; later ones inherit it):
             # the imports and construction (a second of CPU) ran with normal scheduling. A node respawned
             # at FIFO priority starved the running loop of the same or lower priority while it started
-            node.get_logger().info(f"scheduling: {apply_realtime_priority()}")
+            node.get_logger().info(f"scheduling: {apply_realtime_priority()}, {apply_cpu_affinity()}")
             getattr(built, "spinning", lambda: None)()
             logger = node.get_logger()
             while (stop.received is None and node.context.ok()

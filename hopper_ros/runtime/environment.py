@@ -28,6 +28,14 @@ instead of waiting behind a busy process. Linux's RT throttling (95 % of each se
 keeps a runaway node from locking the machine. Without the privilege (CAP_SYS_NICE or an
 rtprio limit) the node runs as usual and says so.
 
+CPU: `HOPPER_CPU=N` pins every thread of the node's process to one CPU, the Nth (modulo their
+count) of those the process may use, once the node is built (`apply_cpu_affinity`). The demo pins
+its real-time processes apart (launch/demo.launch.yaml): left to themselves, the loop's processes
+that wake one another in a chain tend to run on one CPU, and on a CPU whose real-time tasks leave
+the normal ones less than 5 % of a second the kernel's fair server (Linux 6.12 on; RT throttling
+before) stops them all for up to 50 ms to serve the starved normal tasks (docs/sensing.md, "Under
+load"). One CPU, or an index that is not an integer >= 0: refused or left as it is, and said.
+
 Stop signals: a command started with `&` from a script (`bash -c 'make test & wait $!'`, a CI
 runner) starts with SIGINT and SIGQUIT ignored, and its children inherit that; a node that
 inherits an ignored SIGINT does not stop on SIGINT (run_node keeps a disposition its parent chose).
@@ -45,6 +53,7 @@ from typing import MutableMapping
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGQUIT)
 DISCOVERY_RANGE_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 REALTIME_PRIORITY_VAR = "HOPPER_REALTIME_PRIORITY"
+CPU_VAR = "HOPPER_CPU"
 PROFILES_FILE_VAR = "FASTDDS_DEFAULT_PROFILES_FILE"
 LOOPBACK_VAR = "HOPPER_DDS_LOOPBACK"
 DEFAULT_DISCOVERY_RANGE = "LOCALHOST"
@@ -152,6 +161,32 @@ def apply_realtime_priority(environ: MutableMapping[str, str] | None = None) -> 
     except PermissionError:
         return f"normal scheduling ({REALTIME_PRIORITY_VAR}={priority} refused: no permission for SCHED_FIFO)"
     return f"SCHED_FIFO priority {priority}"
+
+
+def cpu_index(environ: MutableMapping[str, str] | None = None) -> int | None:
+    """The CPU index asked for by HOPPER_CPU (None: unset)."""
+    env = os.environ if environ is None else environ
+    value = env.get(CPU_VAR, "").strip()
+    if not value:
+        return None
+    if not value.isdigit():
+        raise RosEnvironmentError(f"{CPU_VAR}={value!r} must be a CPU index >= 0 (unset: any CPU)")
+    return int(value)
+
+
+def apply_cpu_affinity(environ: MutableMapping[str, str] | None = None) -> str:
+    """Pin every thread of this process to the CPU HOPPER_CPU asks for; returns what happened in words."""
+    index = cpu_index(environ)
+    allowed = sorted(os.sched_getaffinity(0))
+    if index is None or len(allowed) < 2:
+        return "any CPU" if index is None else f"any CPU ({CPU_VAR}={index}: only CPU {allowed[0]} is allowed)"
+    cpu = allowed[index % len(allowed)]
+    for thread_id in sorted(int(t) for t in os.listdir("/proc/self/task")):
+        try:
+            os.sched_setaffinity(thread_id, {cpu})
+        except ProcessLookupError:
+            pass                         # ended meanwhile
+    return f"CPU {cpu}"
 
 
 def realtime_scheduling_allowed() -> tuple[bool, str]:
