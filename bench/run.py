@@ -86,6 +86,10 @@ def main(argv=None):
     parser.add_argument("--only", nargs="+", metavar="NAME",
                         help="run only these modules (bench_NAME.py or NAME)")
     args = parser.parse_args(argv)
+    # a bench started with `&` from a script inherits SIGINT ignored; the processes it stops with SIGINT too
+    from hopper_ros.runtime.environment import restore_default_stop_signals
+
+    restore_default_stop_signals()
 
     figures, failed = [], []
     for path in discover(args.only):

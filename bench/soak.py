@@ -35,7 +35,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
-from hopper_ros.runtime.environment import apply_ros_environment, free_domain_id  # noqa: E402
+from hopper_ros.runtime.environment import apply_ros_environment, free_domain_id, restore_default_stop_signals  # noqa: E402
 
 TOPICS = ("body_state", "gait_event", "apex", "stride_command", "motor_command", "motor_status", "/diagnostics")
 WARM_UP = 60.0       # [s] after the throw: the memory taken as the start
@@ -58,6 +58,8 @@ def main() -> int:
     parser.add_argument("--minutes", type=float, default=60.0)
     parser.add_argument("-o", "--output", default=str(REPO / "bench" / "out" / "soak"))
     args = parser.parse_args()
+    # started with `&` from a script, SIGINT is ignored and the recorder inherits that: it never stopped
+    restore_default_stop_signals()
     out = Path(args.output)
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
