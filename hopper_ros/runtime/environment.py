@@ -29,12 +29,10 @@ keeps a runaway node from locking the machine. Without the privilege (CAP_SYS_NI
 rtprio limit) the node runs as usual and says so.
 
 CPU: `HOPPER_CPU=N` pins every thread of the node's process to one CPU, the Nth (modulo their
-count) of those the process may use, once the node is built (`apply_cpu_affinity`). The demo pins
-its real-time processes apart (launch/demo.launch.yaml): left to themselves, the loop's processes
-that wake one another in a chain tend to run on one CPU, and on a CPU whose real-time tasks leave
-the normal ones less than 5 % of a second the kernel's fair server (Linux 6.12 on; RT throttling
-before) stops them all for up to 50 ms to serve the starved normal tasks (docs/sensing.md, "Under
-load"). One CPU, or an index that is not an integer >= 0: refused or left as it is, and said.
+count) of those the process may use, once the node is built (`apply_cpu_affinity`): the usual
+practice on a real-time PC with CPUs set apart for the loop. The demo leaves it unset by default
+(launch/demo.launch.yaml says what pinning did on a 2-core machine). An index that is not an
+integer >= 0 is refused; with one CPU allowed it is left as it is, and said.
 
 Stop signals: a command started with `&` from a script (`bash -c 'make test & wait $!'`, a CI
 runner) starts with SIGINT and SIGQUIT ignored, and its children inherit that; a node that
