@@ -36,15 +36,20 @@ class Let(_Conditional):
     value: Any = None
 
 
-class _Process(_Conditional):
-    """What `node` and `node_container` share."""
+class _Named(_Conditional):
+    """What a process and a composable node share."""
 
     pkg: Any = None
-    exec: Any = None
     name: Any = None
     namespace: Any = None
     param: Any = None
     remap: Any = None
+
+
+class _Process(_Named):
+    """What `node` and `node_container` share."""
+
+    exec: Any = None
     env: Any = None
     ros_args: Any = None
     output: Any = None
@@ -63,13 +68,8 @@ class NodeContainer(_Process):
     composable_node: Any = None
 
 
-class ComposableNode(_Conditional):
-    pkg: Any = None
+class ComposableNode(_Named):
     plugin: Any = None
-    name: Any = None
-    namespace: Any = None
-    param: Any = None
-    remap: Any = None
     extra_arg: Any = None
 
 
