@@ -1,7 +1,7 @@
 """Configuration: where the YAML files live and how they are read and checked. No ROS import.
 
 - `files`    where config/ and launch/ are (a checkout or share/hopper_ros), `load_yaml` (with `base:`)
-- `schema`   typed configuration on pydantic v2: `Section` (the models' base), `unit`, `choice`, `problem`,
+- `schema`   typed configuration on pydantic v2: `Section` (the models' base), `unit`, `choice`, `Problem`,
              `validate`, `load_config`, `ConfigError` (pydantic's errors as one line: file, key, problem)
 - `schemas`  one pydantic model per config file (CONTROL, HARDWARE, SIM, ...) and `load_model`
 

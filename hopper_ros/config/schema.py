@@ -4,7 +4,7 @@ A file's schema is a pydantic model built on `Section`: unknown keys refused, st
 or a string is not a number, NaN and inf are refused, an integer key wants an int, a text a
 non-empty string), ranges as `Field(gt=..., le=...)`, the unit as field metadata (`unit("m",
 gt=0)`), choices as `Literal` (`choice(...)` for numbers), checks across keys as
-`model_validator(mode="after")` raising `problem(key, text)`. `validate(schema, data, source)`
+`model_validator(mode="after")` raising `Problem(key, text)`. `validate(schema, data, source)`
 returns the data as plain dicts and lists, converted to their types, defaults filled in (a key
 whose default is None is left out), or raises `ConfigError`: `config_error` words pydantic's
 ValidationError as one line naming the file, the key and what is wrong, e.g.
@@ -22,7 +22,6 @@ from typing import Annotated, Any, Literal, get_args, get_origin
 
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 from pydantic.fields import FieldInfo
-from pydantic_core import PydanticCustomError
 
 
 class ConfigError(ValueError):
@@ -41,25 +40,28 @@ def unit(unit: str, default: Any = ..., **constraints: Any) -> Any:
     return Field(default, json_schema_extra={"unit": unit}, **constraints)
 
 
-def _not_a_bool(value: Any) -> Any:
-    if isinstance(value, bool):
-        raise PydanticCustomError("literal_error", "a bool is not a number")
-    return value
+class Problem(ValueError):
+    """What a check raises in a validator: the key of the section it names (None: the value checked)
+    and what is wrong, in the words of the one-line error."""
+
+    def __init__(self, key: str | None, text: str):
+        super().__init__(text)
+        self.key = key
 
 
 def choice(*values: Any) -> Any:
     """One of these numbers (True is not 1 here)."""
-    return Annotated[Literal[values], BeforeValidator(_not_a_bool)]
+    def not_a_bool(value: Any) -> Any:
+        if isinstance(value, bool):
+            raise Problem(None, f"must be one of {list(values)}, got {value!r}")
+        return value
 
-
-def problem(key: str | None, text: str) -> PydanticCustomError:
-    """What a check across keys raises: the key of the section it names (None: the section) and what is wrong."""
-    return PydanticCustomError("config", "{text}", {"key": key, "text": text})
+    return Annotated[Literal[values], BeforeValidator(not_a_bool)]
 
 
 def _all_different(values: list) -> list:
     if len(set(map(repr, values))) != len(values):
-        raise problem(None, f"names an entry twice: {_show(values)}")
+        raise Problem(None, f"names an entry twice: {_show(values)}")
     return values
 
 
@@ -71,21 +73,21 @@ def ordered(section: BaseModel, low: str, high: str) -> None:
     """`low` below `high` (both given)."""
     a, b = getattr(section, low), getattr(section, high)
     if a is not None and b is not None and a >= b:
-        raise problem(high, f"must be above {low} ({a:g}), got {b:g}")
+        raise Problem(high, f"must be above {low} ({a:g}), got {b:g}")
 
 
 def at_most(section: BaseModel, key: str, limit: str, unit: str) -> None:
     """`key` not above `limit` (both given)."""
     a, b = getattr(section, key), getattr(section, limit)
     if a is not None and b is not None and a > b:
-        raise problem(key, f"must not exceed {limit} ({b:g} {unit}), got {a:g}")
+        raise Problem(key, f"must not exceed {limit} ({b:g} {unit}), got {a:g}")
 
 
 def within(section: BaseModel, key: str, low: str, high: str) -> None:
     """`key` inside [low, high]."""
     value, a, b = getattr(section, key), getattr(section, low), getattr(section, high)
     if not a <= value <= b:
-        raise problem(key, f"must lie in [{low}, {high}] = [{a:g}, {b:g}], got {value:g}")
+        raise Problem(key, f"must lie in [{low}, {high}] = [{a:g}, {b:g}], got {value:g}")
 
 
 # ------------------------------------------------------------------ validation and its one line
@@ -132,8 +134,8 @@ def config_error(error: ValidationError, schema: type, source: str, at: str = ""
     an unknown key before the others (a misspelt key is why its right spelling is missing)."""
     first = min(error.errors(), key=lambda e: e["type"] != "extra_forbidden")
     kind, loc, value, ctx = first["type"], tuple(first["loc"]), first.get("input"), first.get("ctx") or {}
-    if kind == "config":
-        text, loc = ctx["text"], loc + ((ctx["key"],) if ctx["key"] else ())
+    if isinstance(ctx.get("error"), Problem):
+        text, loc = str(ctx["error"]), loc + ((ctx["error"].key,) if ctx["error"].key else ())
     elif loc[-1:] == ("[key]",):                       # a key outside a mapping's known keys
         text = f"unknown key; known: {', '.join(get_args(_field(schema, loc[:-2] + loc[-1:]).annotation))}"
         loc = loc[:-1]

@@ -22,7 +22,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, Field, model_validator
 
-from hopper_ros.config.schema import DISTINCT, Section, at_most, choice, ordered, problem, unit, within
+from hopper_ros.config.schema import DISTINCT, Problem, Section, at_most, choice, ordered, unit, within
 
 PI_2 = math.pi / 2
 Sign = choice(-1, 1)
@@ -314,11 +314,11 @@ class MOTOR_DRIVER_SECTION(Section):
     @model_validator(mode="after")
     def _timing(self):
         if None not in (self.command_timeout, self.sync_period) and self.command_timeout <= self.sync_period:
-            raise problem("command_timeout", f"must be longer than sync_period ({self.sync_period:g} s), "
+            raise Problem("command_timeout", f"must be longer than sync_period ({self.sync_period:g} s), "
                                              f"got {self.command_timeout:g}")
         consumer, period = self.drive_consumer_time or 0.0, self.master_heartbeat_period or 0.0
         if consumer and not 0 < period < consumer:
-            raise problem("master_heartbeat_period", f"must be positive and below drive_consumer_time ({consumer:g} "
+            raise Problem("master_heartbeat_period", f"must be positive and below drive_consumer_time ({consumer:g} "
                                                      f"s), got {period:g}")
         return self
 
@@ -360,7 +360,7 @@ def check_effects(names, fitted) -> tuple[str, ...]:
 def _bounds_ordered(bounds: dict) -> dict:
     for name, (low, high) in bounds.items():
         if not low < high:
-            raise problem(name, f"must be [low, high] with low < high, got [{low:g}, {high:g}]")
+            raise Problem(name, f"must be [low, high] with low < high, got [{low:g}, {high:g}]")
     return bounds
 
 
@@ -444,7 +444,7 @@ class Identification(Section):
             try:
                 check_effects(self.effects, self.fitted)
             except ValueError as exc:
-                raise problem("effects", str(exc).removeprefix("effects: ")) from None
+                raise Problem("effects", str(exc).removeprefix("effects: ")) from None
         return self
 
 
@@ -463,7 +463,7 @@ class Segment(Section):
     @model_validator(mode="after")
     def _strides_or_seconds(self):
         if self.strides is not None and self.seconds is not None:
-            raise problem("seconds", "give either strides or seconds, not both")
+            raise Problem("seconds", "give either strides or seconds, not both")
         return self
 
 

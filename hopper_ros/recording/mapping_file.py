@@ -14,7 +14,7 @@ import numpy as np
 
 from pydantic import Field, create_model, field_validator
 
-from hopper_ros.config.schema import ConfigError, Section, problem, unit
+from hopper_ros.config.schema import ConfigError, Problem, Section, unit
 
 CHANNELS = ("y", "z", "theta", "tau")
 UNITS = {        # kind -> unit -> factor to SI
@@ -58,7 +58,7 @@ class _Import(Section):
         if not isinstance(value, str):
             return handler(value)
         if value not in BAG_TIMES:
-            raise problem(None, f"must be one of {list(BAG_TIMES)}, got {value!r}")
+            raise Problem(None, f"must be one of {list(BAG_TIMES)}, got {value!r}")
         return value
 
 
