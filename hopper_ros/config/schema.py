@@ -32,7 +32,8 @@ class Section(BaseModel):
     """A mapping of exactly these keys, each of its type, strictly (no bool for a number, no
     NaN or inf, no text for a number, no empty text)."""
 
-    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, str_min_length=1)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, str_min_length=1,
+                              defer_build=True)     # a model is built when first used: a node builds its own files only
 
 
 def unit(unit: str, default: Any = ..., **constraints: Any) -> Any:
