@@ -212,12 +212,12 @@ def _field(schema: type, loc: tuple) -> FieldInfo:
     info = FieldInfo.from_annotation(schema)
     for step in loc:
         annotation, args = info.annotation, get_args(info.annotation)
-        if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        if isinstance(annotation, type) and issubclass(annotation, BaseModel) and step in annotation.model_fields:
             info = annotation.model_fields[step]
         elif get_origin(annotation) in (list, dict):
             info = FieldInfo.from_annotation(args[0] if step == "[key]" or get_origin(annotation) is list else args[1])
         else:
-            return FieldInfo.from_annotation(Any)
+            return FieldInfo.from_annotation(Any)        # (nothing known of it: pydantic's own words)
     return info
 
 
