@@ -141,7 +141,7 @@ def config_error(error: ValidationError, schema: type, source: str, at: str = ""
         text = f"unknown key; known: {', '.join(get_args(_field(schema, loc[:-2] + loc[-1:]).annotation))}"
         loc = loc[:-1]
     elif kind == "extra_forbidden":
-        text = f"unknown key; known here: {', '.join(_field(schema, loc[:-1]).annotation.model_fields)}"
+        text = f"unknown key; known here: {', '.join(getattr(_field(schema, loc[:-1]).annotation, 'model_fields', ()))}"
     else:
         text = _phrase(kind, value, ctx, _field(schema, loc), first["msg"])
     path = ".".join(filter(None, [at, "".join(f"[{k}]" if isinstance(k, int) else f".{k}" for k in loc)[1:]]))
