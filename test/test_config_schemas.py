@@ -1,4 +1,5 @@
-"""One typed, validated schema per config file (issue 17): hopper_ros/config/schema.py, hopper_ros/config/schemas.py.
+"""One typed, validated schema per config file (issues 17, 30: pydantic models): hopper_ros/config/schema.py,
+hopper_ros/config/schemas.py.
 
 A table of bad configuration files, each given to a node or tool as a user gives it: the process
 exits 1 and its stderr is one line naming the file, the key and what is wrong (the audit had 9 of
@@ -16,9 +17,11 @@ import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Annotated, List, Literal
 
 import pytest
 import yaml
+from pydantic import Field
 
 from conftest import REPO
 from hopper_ros.canbus.driver import NODE_KEYS, load_motor_driver
@@ -26,18 +29,26 @@ from hopper_ros.config import load_yaml
 from hopper_ros.config.schemas import CONTROL, HARDWARE, IDENTIFICATION, MODEL, MOTOR_DRIVER, SCHEDULE, SENSING, SIM
 from hopper_ros.control.config import load_control
 from hopper_ros.hardware.config import load_hardware
-from hopper_ros.config.schema import ConfigError, Items, Number, Section, Text, load_config, validate
+from hopper_ros.config.schema import ConfigError, Section, load_config, unit, validate
 
 DELETE = object()
 
 # ------------------------------------------------------------------ the validator itself
 
 
+class _A(Section):
+    x: float = unit("m", gt=0)
+    n: int = 3
+    name: Literal["p", "q"]
+
+
+class _File(Section):
+    a: _A
+    list: List[Annotated[float, Field(ge=0)]] = Field(min_length=1)
+
+
 def test_the_validator_names_the_key_and_converts():
-    schema = Section({"a": Section({"x": Number("m", gt=0), "n": Number(integer=True, default=3),
-                                    "name": Text(choices=("p", "q"))}),
-                      "list": Items(Number(ge=0), min_items=1)})
-    assert validate(schema, {"a": {"x": 1, "name": "p"}, "list": [1, 2.5]}, "f.yaml") == \
+    assert validate(_File, {"a": {"x": 1, "name": "p"}, "list": [1, 2.5]}, "f.yaml") == \
         {"a": {"x": 1.0, "n": 3, "name": "p"}, "list": [1.0, 2.5]}
     cases = [({"a": {"x": -1, "name": "p"}, "list": [1]}, "f.yaml: a.x: must be > 0 m, got -1"),
              ({"a": {"x": True, "name": "p"}, "list": [1]}, "f.yaml: a.x: must be a number (> 0 m), got True"),
@@ -51,7 +62,7 @@ def test_the_validator_names_the_key_and_converts():
              ([1, 2], "f.yaml: the file: must be a mapping of keys")]
     for data, message in cases:
         with pytest.raises(ConfigError) as info:
-            validate(schema, data, "f.yaml")
+            validate(_File, data, "f.yaml")
         assert str(info.value).startswith(message), (str(info.value), message)
         assert "\n" not in str(info.value)
 

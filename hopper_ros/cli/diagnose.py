@@ -30,16 +30,17 @@ def _main(args: argparse.Namespace) -> int:
     from hopper_ros.cli.importer import load_for_tool
     from hopper_ros.diagnosis import DiagnosisError, diagnose_file
     from hopper_ros.diagnosis.progress import Progress
+    from hopper_ros.diagnosis.settings import load_settings
     from hopper_ros.recording.recordings import RecordingError
 
     from hopper_ros.config.schemas import load_model
-    from hopper_ros.config.schema import ConfigError
 
     try:
-        load_model(args.model)                          # its schema first: one line naming file and key
+        load_model(args.model)                          # the schemas first: one line naming file and key
+        settings = load_settings(args.settings)
         recording = load_for_tool(args.recording, args.map, "diagnose")
         progress = Progress(enabled=False if args.quiet else None)
-        result = diagnose_file(recording, args.model, args.output, args.settings, args.json, progress)
+        result = diagnose_file(recording, args.model, args.output, settings, args.json, progress)
     except (DiagnosisError, RecordingError, ValueError, FileNotFoundError, KeyError) as exc:
         print(f"hopper diagnose: error: {exc}", file=sys.stderr)
         return 3                     # bad input (cli/exit_codes.py)

@@ -1,11 +1,13 @@
-"""Typed, validated configuration: the one mechanism of the package (issue 17). No ROS import.
+"""Typed, validated configuration on pydantic v2 (issues 17, 30): the one mechanism of the package. No ROS import.
 
-A schema is built from a few dataclasses (`Number`, `Text`, `Flag`, `Items`, `Section`,
-`Anything`) and checked by one validator, `validate(schema, data, source)`: types, required
-keys, ranges with their units, choices, unknown keys refused, and checks across keys. It returns
-the data with every value converted to its type (int, float, str, bool, list, dict) and defaults
-filled in, or raises `ConfigError`, whose message is one line naming the file, the key and what
-is wrong, e.g.
+A file's schema is a pydantic model built on `Section`: unknown keys refused, strict types (a bool
+or a string is not a number, NaN and inf are refused, an integer key wants an int, a text a
+non-empty string), ranges as `Field(gt=..., le=...)`, the unit as field metadata (`unit("m",
+gt=0)`), choices as `Literal` (`choice(...)` for numbers), checks across keys as
+`model_validator(mode="after")` raising `Problem(key, text)`. `validate(schema, data, source)`
+returns the data as plain dicts and lists, converted to their types, defaults filled in (a key
+whose default is None is left out), or raises `ConfigError`: `config_error` words pydantic's
+ValidationError as one line naming the file, the key and what is wrong, e.g.
 
     config/control.yaml: deadbeat.max_torque: must be > 0 N m, got -12
 
@@ -15,202 +17,93 @@ schema)` reads a file (config/ name or path, `base:` variants merged) and valida
 
 from __future__ import annotations
 
-import math
 import os
-from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Annotated, Any, Literal, get_args, get_origin
 
-_REQUIRED = object()
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
+from pydantic.fields import FieldInfo
 
 
 class ConfigError(ValueError):
     """A configuration file that cannot be used; one line: file, key, what is wrong."""
 
 
-def _show(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+class Section(BaseModel):
+    """A mapping of exactly these keys, each of its type, strictly (no bool for a number, no
+    NaN or inf, no text for a number, no empty text)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, str_min_length=1,
+                              defer_build=True)     # a model is built when first used: a node builds its own files only
 
 
-def _unit(unit: str) -> str:
-    return f" {unit}" if unit else ""
+def unit(unit: str, default: Any = ..., **constraints: Any) -> Any:
+    """`Field` of a quantity in `unit` (shown with its bounds in the errors and the JSON schema)."""
+    return Field(default, json_schema_extra={"unit": unit}, **constraints)
 
 
-@dataclass(frozen=True, kw_only=True)
-class _Spec:
-    """What every kind of value has: its default (required when none) and a description."""
+class Problem(ValueError):
+    """What a check raises in a validator: the key of the section it names (None: the value checked)
+    and what is wrong, in the words of the one-line error."""
 
-    default: Any = _REQUIRED
-    doc: str = ""
+    def __init__(self, key: str | None, text: str):
+        super().__init__(text)
+        self.key = key
 
 
-@dataclass(frozen=True)
-class Number(_Spec):
-    """A finite number (an int where `integer`), in `unit`, within the bounds given."""
-
-    unit: str = ""
-    gt: float | None = None
-    ge: float | None = None
-    lt: float | None = None
-    le: float | None = None
-    integer: bool = False
-    choices: tuple = ()
-
-    def check(self, value: Any, where: str) -> Any:
-        kind = "an integer" if self.integer else "a number"
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{where}: must be {kind}{self._range()}, got {_show(value)}")
-        if not math.isfinite(value):
-            raise ConfigError(f"{where}: must be finite, got {value}")
-        if self.integer:
-            if int(value) != value:
-                raise ConfigError(f"{where}: must be an integer{self._range()}, got {value}")
-            value = int(value)
-        else:
-            value = float(value)
-        if self.choices and value not in self.choices:
-            raise ConfigError(f"{where}: must be one of {list(self.choices)}, got {_show(value)}")
-        for bound, ok, sign in ((self.gt, lambda v, b: v > b, ">"), (self.ge, lambda v, b: v >= b, ">="),
-                                (self.lt, lambda v, b: v < b, "<"), (self.le, lambda v, b: v <= b, "<=")):
-            if bound is not None and not ok(value, bound):
-                raise ConfigError(f"{where}: must be {sign} {bound:g}{_unit(self.unit)}, got {value:g}")
+def choice(*values: Any) -> Any:
+    """One of these numbers (True is not 1 here)."""
+    def not_a_bool(value: Any) -> Any:
+        if isinstance(value, bool):
+            raise Problem(None, f"must be one of {list(values)}, got {value!r}")
         return value
 
-    def _range(self) -> str:
-        parts = []
-        for bound, sign in ((self.gt, ">"), (self.ge, ">="), (self.lt, "<"), (self.le, "<=")):
-            if bound is not None:
-                parts.append(f"{sign} {bound:g}")
-        text = " and ".join(parts)
-        return f" ({text}{_unit(self.unit)})" if text else (f" [{self.unit}]" if self.unit else "")
+    return Annotated[Literal[values], BeforeValidator(not_a_bool)]
 
 
-@dataclass(frozen=True)
-class Text(_Spec):
-    """A non-empty string, one of `choices` when given."""
-
-    choices: tuple = ()
-
-    def check(self, value: Any, where: str) -> str:
-        if not isinstance(value, str) or not value:
-            expected = f"one of {list(self.choices)}" if self.choices else "a non-empty string"
-            raise ConfigError(f"{where}: must be {expected}, got {_show(value)}")
-        if self.choices and value not in self.choices:
-            raise ConfigError(f"{where}: must be one of {list(self.choices)}, got {_show(value)}")
-        return value
+def _all_different(values: list) -> list:
+    if len(set(map(repr, values))) != len(values):
+        raise Problem(None, f"names an entry twice: {_show(values)}")
+    return values
 
 
-@dataclass(frozen=True)
-class Flag(_Spec):
-    """true or false."""
-
-    def check(self, value: Any, where: str) -> bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where}: must be true or false, got {_show(value)}")
-        return value
+#: a list whose entries all differ: `Annotated[list[X], DISTINCT]`
+DISTINCT = AfterValidator(_all_different)
 
 
-@dataclass(frozen=True)
-class Items(_Spec):
-    """A list of `item`, with `min_items` .. `max_items` entries, optionally all different."""
-
-    item: Any
-    min_items: int = 0
-    max_items: int | None = None
-    unique: bool = False
-
-    def check(self, value: Any, where: str) -> list:
-        if not isinstance(value, list):
-            raise ConfigError(f"{where}: must be a list, got {_show(value)}")
-        if len(value) < self.min_items or (self.max_items is not None and len(value) > self.max_items):
-            count = (f"{self.min_items}" if self.max_items == self.min_items else
-                     f"{self.min_items} to {self.max_items}" if self.max_items is not None else f"at least {self.min_items}")
-            raise ConfigError(f"{where}: must hold {count} entries, got {len(value)}")
-        out = [_check(self.item, entry, f"{where}[{index}]") for index, entry in enumerate(value)]
-        if self.unique and len(set(map(repr, out))) != len(out):
-            raise ConfigError(f"{where}: names an entry twice: {_show(value)}")
-        return out
+def ordered(section: BaseModel, low: str, high: str) -> None:
+    """`low` below `high` (both given)."""
+    a, b = getattr(section, low), getattr(section, high)
+    if a is not None and b is not None and a >= b:
+        raise Problem(high, f"must be above {low} ({a:g}), got {b:g}")
 
 
-@dataclass(frozen=True)
-class Anything(_Spec):
-    """Passed through unchecked (a part another module validates, e.g. sim.effects)."""
-
-    def check(self, value: Any, where: str) -> Any:
-        return value
-
-
-#: a check across keys: (section values) -> None, or (key, problem) naming what is wrong
-Check = Callable[[dict], "tuple[str, str] | None"]
+def at_most(section: BaseModel, key: str, limit: str, unit: str) -> None:
+    """`key` not above `limit` (both given)."""
+    a, b = getattr(section, key), getattr(section, limit)
+    if a is not None and b is not None and a > b:
+        raise Problem(key, f"must not exceed {limit} ({b:g} {unit}), got {a:g}")
 
 
-@dataclass(frozen=True)
-class Section(_Spec):
-    """A mapping with exactly these keys (`fields`); missing required keys and unknown keys are
-    errors. `values`: instead of fixed keys, any key (its name checked by `keys`) with values of
-    this schema. `checks` run on the converted values."""
-
-    fields: Mapping[str, Any] = field(default_factory=dict)
-    values: Any = None
-    keys: tuple = ()
-    checks: tuple = ()
-
-    def check(self, value: Any, where: str) -> dict:
-        if not isinstance(value, Mapping):
-            raise ConfigError(f"{where or 'the file'}: must be a mapping of keys, got {_show(value)}")
-        prefix = f"{where}." if where else ""
-        out: dict = {}
-        if self.values is not None:
-            for key, entry in value.items():
-                if self.keys and key not in self.keys:
-                    raise ConfigError(f"{prefix}{key}: unknown key; known: {', '.join(self.keys)}")
-                out[key] = _check(self.values, entry, f"{prefix}{key}")
-        else:
-            unknown = [key for key in value if key not in self.fields]
-            if unknown:
-                raise ConfigError(f"{prefix}{unknown[0]}: unknown key; known here: {', '.join(self.fields)}")
-            for key, spec in self.fields.items():
-                if key in value:
-                    out[key] = _check(spec, value[key], f"{prefix}{key}")
-                elif spec.default is _REQUIRED:
-                    raise ConfigError(f"{prefix}{key}: missing (required{_describe(spec)})")
-                elif spec.default is not None:
-                    out[key] = spec.default
-        for check in self.checks:
-            problem = check(out)
-            if problem is not None:
-                key, text = problem
-                raise ConfigError(f"{prefix}{key}: {text}")
-        return out
+def within(section: BaseModel, key: str, low: str, high: str) -> None:
+    """`key` inside [low, high]."""
+    value, a, b = getattr(section, key), getattr(section, low), getattr(section, high)
+    if not a <= value <= b:
+        raise Problem(key, f"must lie in [{low}, {high}] = [{a:g}, {b:g}], got {value:g}")
 
 
-def _describe(spec: Any) -> str:
-    if isinstance(spec, Number):
-        return f": {'an integer' if spec.integer else 'a number'}{spec._range()}"
-    if isinstance(spec, Section):
-        return ": a mapping"
-    if isinstance(spec, Items):
-        return ": a list"
-    if isinstance(spec, Flag):
-        return ": true or false"
-    if isinstance(spec, Text) and spec.choices:
-        return f": one of {list(spec.choices)}"
-    return ""
+# ------------------------------------------------------------------ validation and its one line
 
 
-def _check(spec: Any, value: Any, where: str) -> Any:
-    return spec.check(value, where)
-
-
-def validate(schema: Section, data: Any, source: str) -> dict:
-    """`data` checked and converted by `schema`; ConfigError "SOURCE: key.path: problem" otherwise."""
+def validate(schema: type[BaseModel], data: Any, source: str, at: str = "") -> dict:
+    """`data` checked and converted by `schema` (`at`: the key path it sits under, for the errors);
+    ConfigError "SOURCE: key.path: problem" otherwise."""
     try:
-        return schema.check(data, "")
-    except ConfigError as exc:
-        raise ConfigError(f"{source}: {exc}") from None
+        return _plain(schema.model_validate(data))
+    except ValidationError as exc:
+        raise config_error(exc, schema, source, at) from None
 
 
-def load_config(name: str | os.PathLike, schema: Section) -> dict:
+def load_config(name: str | os.PathLike, schema: type[BaseModel]) -> dict:
     """Read a config file (config/ name or path; `base:` variants merged) and validate it."""
     from hopper_ros.config.files import config_path, load_yaml
 
@@ -225,23 +118,109 @@ def load_config(name: str | os.PathLike, schema: Section) -> dict:
     return validate(schema, data, str(path))
 
 
-# ------------------------------------------------------------------ checks used by several schemas
+def _plain(value: Any) -> Any:
+    """A validated model as plain dicts and lists; a key whose default None was left as it is: left out."""
+    if isinstance(value, BaseModel):
+        return {name: _plain(getattr(value, name)) for name in type(value).model_fields
+                if name in value.model_fields_set or getattr(value, name) is not None}
+    if isinstance(value, list):
+        return [_plain(entry) for entry in value]
+    if isinstance(value, dict):
+        return {key: _plain(entry) for key, entry in value.items()}
+    return value
 
-def ordered(low: str, high: str, strict: bool = True) -> Check:
-    """`low` below `high` (both present)."""
-    def check(values: dict):
-        if low in values and high in values:
-            a, b = values[low], values[high]
-            if (a >= b) if strict else (a > b):
-                return high, f"must be {'above' if strict else 'at least'} {low} ({a:g}), got {b:g}"
-        return None
-    return check
+
+def config_error(error: ValidationError, schema: type, source: str, at: str = "") -> ConfigError:
+    """pydantic's ValidationError as one line, `SOURCE: key.path: what is wrong`: its first error,
+    an unknown key before the others (a misspelt key is why its right spelling is missing)."""
+    first = min(error.errors(), key=lambda e: e["type"] != "extra_forbidden")
+    kind, loc, value, ctx = first["type"], tuple(first["loc"]), first.get("input"), first.get("ctx") or {}
+    if isinstance(ctx.get("error"), Problem):
+        text, loc = str(ctx["error"]), loc + ((ctx["error"].key,) if ctx["error"].key else ())
+    elif loc[-1:] == ("[key]",):                       # a key outside a mapping's known keys
+        text = f"unknown key; known: {', '.join(get_args(_field(schema, loc[:-2] + loc[-1:]).annotation))}"
+        loc = loc[:-1]
+    elif kind == "extra_forbidden":
+        text = f"unknown key; known here: {', '.join(getattr(_field(schema, loc[:-1]).annotation, 'model_fields', ()))}"
+    else:
+        text = _phrase(kind, value, ctx, _field(schema, loc), first["msg"])
+    path = ".".join(filter(None, [at, "".join(f"[{k}]" if isinstance(k, int) else f".{k}" for k in loc)[1:]]))
+    return ConfigError(f"{source}: {path or 'the file'}: {text}")
 
 
-def within(key: str, low: str, high: str) -> Check:
-    """`key` inside [low, high] (all present)."""
-    def check(values: dict):
-        if all(k in values for k in (key, low, high)) and not values[low] <= values[key] <= values[high]:
-            return key, f"must lie in [{low}, {high}] = [{values[low]:g}, {values[high]:g}], got {values[key]:g}"
-        return None
-    return check
+_BOUNDS = {"greater_than": (">", "gt"), "greater_than_equal": (">=", "ge"), "less_than": ("<", "lt"),
+           "less_than_equal": ("<=", "le")}
+
+
+def _phrase(kind: str, value: Any, ctx: dict, info: FieldInfo, msg: str) -> str:
+    """What is wrong with the value of a field (pydantic's error `kind`), in the project's words."""
+    if kind == "missing":
+        expected = _expected(info, missing=True)
+        return f"missing (required{': ' + expected if expected else ''})"
+    if kind == "finite_number":
+        return f"must be finite, got {value}"
+    if kind in _BOUNDS:
+        sign, bound = _BOUNDS[kind]
+        return f"must be {sign} {ctx[bound]:g}{_unit(info)}, got {value:g}"
+    if kind in ("too_short", "too_long"):
+        low, high = _constraints(info).get("min_length", 0), _constraints(info).get("max_length")
+        count = f"{low}" if high == low else f"{low} to {high}" if high is not None else f"at least {low}"
+        return f"must hold {count} entries, got {ctx['actual_length']}"
+    if kind in ("model_type", "dict_type", "model_attributes_type"):
+        return f"must be a mapping of keys, got {_show(value)}"
+    expected = _expected(info)
+    return f"must be {expected}, got {_show(value)}" if expected else f"{msg}, got {_show(value)}"
+
+
+def _expected(info: FieldInfo, missing: bool = False) -> str:
+    """What a field holds, in words: "a number (> 0 m)", "one of ['p', 'q']", ... ("" for any value;
+    for a text when it is missing too, as ever)."""
+    annotation = info.annotation
+    if get_origin(annotation) is Literal:
+        return f"one of {list(get_args(annotation))}"
+    if annotation in (float, int):
+        return f"{'an integer' if annotation is int else 'a number'}{_range(info)}"
+    if annotation is bool:
+        return "true or false"
+    if annotation is str:
+        return "" if missing else "a non-empty string"
+    if get_origin(annotation) is list:
+        return "a list"
+    if get_origin(annotation) is dict or isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return "a mapping"
+    return ""
+
+
+def _constraints(info: FieldInfo) -> dict:
+    return {name: getattr(item, name) for item in info.metadata
+            for name in ("gt", "ge", "lt", "le", "min_length", "max_length") if getattr(item, name, None) is not None}
+
+
+def _unit(info: FieldInfo) -> str:
+    unit = (info.json_schema_extra or {}).get("unit")
+    return f" {unit}" if unit else ""
+
+
+def _range(info: FieldInfo) -> str:
+    bounds = _constraints(info)
+    text = " and ".join(f"{sign} {bounds[name]:g}" for sign, name in _BOUNDS.values() if name in bounds)
+    return f" ({text}{_unit(info)})" if text else (f" [{_unit(info).strip()}]" if _unit(info) else "")
+
+
+def _field(schema: type, loc: tuple) -> FieldInfo:
+    """The field at `loc` (keys, list indexes, "[key]" for a mapping's key) of the model `schema`."""
+    info = FieldInfo.from_annotation(schema)
+    for step in loc:
+        annotation, args = info.annotation, get_args(info.annotation)
+        if isinstance(annotation, type) and issubclass(annotation, BaseModel) and step in annotation.model_fields:
+            info = annotation.model_fields[step]
+        elif get_origin(annotation) in (list, dict):
+            info = FieldInfo.from_annotation(args[0] if step == "[key]" or get_origin(annotation) is list else args[1])
+        else:
+            return FieldInfo.from_annotation(Any)        # (nothing known of it: pydantic's own words)
+    return info
+
+
+def _show(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."

@@ -1,5 +1,5 @@
-"""One schema per configuration file (hopper_ros/config/schema.py: types, required keys, ranges with
-units, unknown keys refused). No ROS import.
+"""One pydantic model per configuration file (hopper_ros/config/schema.py: `Section`, strict types,
+units as field metadata, unknown keys refused, one-line errors). No ROS import.
 
 | file | schema | read by |
 |---|---|---|
@@ -11,267 +11,325 @@ units, unknown keys refused). No ROS import.
 | motor_driver.yaml (and variants) | MOTOR_DRIVER | motor_driver |
 | identification.yaml | IDENTIFICATION (with `effects:`, library names checked against `fitted`, and `lanes:`) | identify, report |
 | setpoints/*.yaml | SCHEDULE | setpoint_scheduler |
+| diagnosis.yaml | hopper_ros.diagnosis.settings.DIAGNOSIS (from its `Settings`) | diagnose |
+| import mappings | hopper_ros.recording.mapping_file.SCHEMA | import, diagnose --map |
 
-diagnosis.yaml (read by hopper_ros.diagnosis.settings.load_settings, which checks it itself) and the
-launch files are not covered yet: `load_config(name, SCHEMA)` is the way to adopt them.
+The launch files' entities are checked by the models of hopper_ros/launch/entities.py.
 """
 
-from __future__ import annotations
-
 import math
+from typing import Annotated, Any, Literal
 
-from hopper_ros.config.schema import Anything, Flag, Items, Number, Section, Text, ordered, within
+from pydantic import AfterValidator, Field, model_validator
+
+from hopper_ros.config.schema import DISTINCT, Problem, Section, at_most, choice, ordered, unit, within
 
 PI_2 = math.pi / 2
+Sign = choice(-1, 1)
 
 # ------------------------------------------------------------------------------------ hardware.yaml
 
 
-def _encoder(doc: str) -> Section:
-    return Section({
-        "lines": Number("lines", gt=0, integer=True),
-        "quadrature": Number(choices=(1, 2, 4), integer=True),
-        "transmission": Number("encoder turns per turn", gt=0),
-        "direction": Number(choices=(-1, 1), integer=True),
-        "offset_counts": Number("counts", integer=True),
-    }, doc=doc)
+class Encoder(Section):
+    lines: int = unit("lines", gt=0)
+    quadrature: choice(1, 2, 4)
+    transmission: float = unit("encoder turns per turn", gt=0)
+    direction: Sign
+    offset_counts: int = unit("counts")
 
 
-def _continuous_within_limit(values: dict):
-    if values["continuous_current"] > values["current_limit"]:
-        return "continuous_current", (f"must not exceed current_limit ({values['current_limit']:g} A), "
-                                      f"got {values['continuous_current']:g}")
-    return None
+class Encoders(Section):
+    azimuth: Encoder = Field(description="planarizer, forward")
+    elevation: Encoder = Field(description="planarizer, vertical")
+    motor: Encoder = Field(description="hip motor")
 
 
-HARDWARE = Section({
-    "boom": Section({
-        "length": Number("m", gt=0),
-        "parallel_height": Number("m", ge=0),
-        "leg_offset": Number("m"),
-        "ground_height": Number("m", ge=0),
-    }),
-    "encoders": Section({"azimuth": _encoder("planarizer, forward"), "elevation": _encoder("planarizer, vertical"),
-                         "motor": _encoder("hip motor")}),
-    "motor": Section({
-        "gear_ratio": Number(gt=0),
-        "torque_constant": Number("N m/A", gt=0),
-        "direction": Number(choices=(-1, 1), integer=True),
-        "rotor_inertia": Number("kg m^2", gt=0),
-        "leg_inertia": Number("kg m^2", gt=0),
-        "viscous_friction": Number("N m s/rad", ge=0),
-    }),
-    "drive": Section({
-        "node_id": Number(ge=1, le=127, integer=True),
-        "current_limit": Number("A", gt=0),
-        "continuous_current": Number("A", gt=0),
-        "position_gains": Section({k: Number(ge=0, le=32767, integer=True) for k in ("p", "i", "d")}),
-        "heartbeat_period": Number("s", gt=0, le=65.535),
-    }, checks=(_continuous_within_limit,)),
-    "microcontroller": Section({
-        "host": Text(),
-        "port": Number(ge=1, le=65535, integer=True),
-        "sample_period": Number("s", gt=0, le=0.1),
-    }),
-    "can": Section({
-        "interface": Text(),
-        "channel": Text(default=None),
-        "host": Text(default=None),
-        "port": Number(ge=1, le=65535, integer=True, default=None),
-        "bitrate": Number("bit/s", gt=0, integer=True, default=None),
-        "connect_timeout": Number("s", gt=0, default=None),
-    }),
-})
+class Boom(Section):
+    length: float = unit("m", gt=0)
+    parallel_height: float = unit("m", ge=0)
+    leg_offset: float = unit("m")
+    ground_height: float = unit("m", ge=0)
+
+
+class Motor(Section):
+    gear_ratio: float = Field(gt=0)
+    torque_constant: float = unit("N m/A", gt=0)
+    direction: Sign
+    rotor_inertia: float = unit("kg m^2", gt=0)
+    leg_inertia: float = unit("kg m^2", gt=0)
+    viscous_friction: float = unit("N m s/rad", ge=0)
+
+
+class PositionGains(Section):
+    p: int = Field(ge=0, le=32767)
+    i: int = Field(ge=0, le=32767)
+    d: int = Field(ge=0, le=32767)
+
+
+class Drive(Section):
+    node_id: int = Field(ge=1, le=127)
+    current_limit: float = unit("A", gt=0)
+    continuous_current: float = unit("A", gt=0)
+    position_gains: PositionGains
+    heartbeat_period: float = unit("s", gt=0, le=65.535)
+
+    @model_validator(mode="after")
+    def _continuous_within_limit(self):
+        at_most(self, "continuous_current", "current_limit", "A")
+        return self
+
+
+class Microcontroller(Section):
+    host: str
+    port: int = Field(ge=1, le=65535)
+    sample_period: float = unit("s", gt=0, le=0.1)
+
+
+class Can(Section):
+    interface: str
+    channel: str = None
+    host: str = None
+    port: int = Field(None, ge=1, le=65535)
+    bitrate: int = unit("bit/s", None, gt=0)
+    connect_timeout: float = unit("s", None, gt=0)
+
+
+class HARDWARE(Section):
+    boom: Boom
+    encoders: Encoders
+    motor: Motor
+    drive: Drive
+    microcontroller: Microcontroller
+    can: Can
 
 # ------------------------------------------------------------------------------------ model.yaml
 
-MODEL_FIELDS = {
-    "body_mass": Number("kg", gt=0),
-    "toe_mass": Number("kg", ge=0),
-    "gravity": Number("m/s^2", gt=0),
-    "stiffness": Number("N/m", gt=0),
-    "damping": Number("N s/m", ge=0),
-    "flight_damping_horizontal": Number("1/s", ge=0),
-    "flight_damping_vertical": Number("1/s", ge=0),
-    "rest_length": Number("m", gt=0),
-}
-MODEL = Section({
-    "model": Section(MODEL_FIELDS),
+
+class ModelParameters(Section):
+    """The extended TD-SLIP model's parameters (ModelParams' fields)."""
+
+    body_mass: float = unit("kg", gt=0)
+    toe_mass: float = unit("kg", ge=0)
+    gravity: float = unit("m/s^2", gt=0)
+    stiffness: float = unit("N/m", gt=0)
+    damping: float = unit("N s/m", ge=0)
+    flight_damping_horizontal: float = unit("1/s", ge=0)
+    flight_damping_vertical: float = unit("1/s", ge=0)
+    rest_length: float = unit("m", gt=0)
+
+
+MODEL_FIELDS = tuple(ModelParameters.model_fields)
+
+
+class MODEL(Section):
+    model: ModelParameters
     # an identified model's library effects {name: magnitude} (`hopper identify --effects`): names,
     # numbers and which may be infinite are checked by hopper_ros.physics.params.load_model
-    "effects": Anything(default=None, doc="{effect library name: magnitude}, checked by physics.params.load_model"),
-})
+    effects: Any = Field(None, description="{effect library name: magnitude}, checked by physics.params.load_model")
 
 # ------------------------------------------------------------------------------------ sim.yaml
 
 
-def _sensor(key: str, unit: str) -> Section:
-    return Section({"enabled": Flag(), key: Number(unit, ge=0)})
+class EncoderNoise(Section):
+    enabled: bool
+    counts: float = unit("counts", ge=0)
 
 
-SIM = Section({"sim": Section({
-    "period": Number("s", gt=0, le=0.1),
-    "substeps": Number(ge=1, le=1000, integer=True),
-    "physics": Section(MODEL_FIELDS, doc="the extended TD-SLIP model's parameters (ModelParams' fields)"),
-    "effects": Anything(doc="entries of the effect library, checked by hopper_ros.sim.config (library names, "
-                        "each one's parameter)"),
-    "sensors": Section({
-        "encoder_noise": _sensor("counts", "counts"),
-        "current_noise": _sensor("current", "A"),
-        "force_plate_noise": _sensor("force", "N"),
-    }),
-    "force_plate": Section({"contact_threshold": Number("N", ge=0)}),
-    "experiment": Section({"pre_touchdown_height": Number("m", ge=0)}),
-    "initial_apex": Section({
-        "apex_height": Number("m", gt=0),
-        "forward_speed": Number("m/s"),
-        "leg_angle": Number("rad", gt=-PI_2, lt=PI_2),
-    }),
-    "seed": Number(ge=0, integer=True, default=0),
-})})
+class CurrentNoise(Section):
+    enabled: bool
+    current: float = unit("A", ge=0)
+
+
+class ForcePlateNoise(Section):
+    enabled: bool
+    force: float = unit("N", ge=0)
+
+
+class Sensors(Section):
+    encoder_noise: EncoderNoise
+    current_noise: CurrentNoise
+    force_plate_noise: ForcePlateNoise
+
+
+class ForcePlate(Section):
+    contact_threshold: float = unit("N", ge=0)
+
+
+class Experiment(Section):
+    pre_touchdown_height: float = unit("m", ge=0)
+
+
+class InitialApex(Section):
+    apex_height: float = unit("m", gt=0)
+    forward_speed: float = unit("m/s")
+    leg_angle: float = unit("rad", gt=-PI_2, lt=PI_2)
+
+
+class Sim(Section):
+    period: float = unit("s", gt=0, le=0.1)
+    substeps: int = Field(ge=1, le=1000)
+    physics: ModelParameters
+    effects: Any = Field(description="entries of the effect library, checked by hopper_ros.sim.config (library "
+                         "names, each one's parameter)")
+    sensors: Sensors
+    force_plate: ForcePlate
+    experiment: Experiment
+    initial_apex: InitialApex
+    seed: int = Field(0, ge=0)
+
+
+class SIM(Section):
+    sim: Sim
 
 # ------------------------------------------------------------------------------------ sensing.yaml
 
 
-def _acquire_below_track(values: dict):
-    if values["acquire_velocity_std"] > values["track_velocity_std"]:
-        return "acquire_velocity_std", (f"must not exceed track_velocity_std ({values['track_velocity_std']:g} m/s), "
-                                        f"got {values['acquire_velocity_std']:g}")
-    return None
+class Bridge(Section):
+    receive_buffer_bytes: int = unit("bytes", ge=0)
+    clock_tolerance: float = unit("s", ge=0)
+    reorder_window: int = unit("packets", ge=0)
+    resync_after: int = unit("packets", ge=2)
 
 
-SENSING = Section({"sensing": Section({
-    "hardware_file": Text(),
-    "model_file": Text(),
-    "diagnostics_period": Number("s", gt=0),
-    "queue_depth": Number("samples", ge=1, integer=True),
-    "bridge": Section({
-        "receive_buffer_bytes": Number("bytes", ge=0, integer=True),
-        "clock_tolerance": Number("s", ge=0),
-        "reorder_window": Number("packets", ge=0, integer=True),
-        "resync_after": Number("packets", ge=2, integer=True),
-    }),
-    "estimator": Section({
-        "vertical_process_noise": Number("m s^-2.5", gt=0),
-        "horizontal_process_noise": Number("m s^-2.5", gt=0),
-        "measurement_noise": Text(choices=("quantization", "thesis")),
-        "quantization_std_counts": Number("counts", gt=0),
-        "leg_process_noise": Number("rad s^-1.5", gt=0),
-        "initial_velocity_std": Number("m/s", ge=0),
-        "initial_acceleration_std": Number("m/s^2", ge=0),
-        "initial_leg_rate_std": Number("rad/s", ge=0),
-        "outlier_gate": Number("sigma", gt=0),
-        "reinitialise_after": Number("samples", ge=1, integer=True),
-        "max_prediction_gap": Number("s", gt=0),
-        "clock_drift_rate": Number("s/s", ge=0),
-        "clock_max_error": Number("s", ge=0),
-        "clock_max_lag": Number("s", ge=0),
-        "clock_reanchor_after": Number("s", ge=0),
-    }),
-    "detector": Section({
-        "pre_touchdown_height": Number("m", ge=0),
-        "pre_touchdown_lead": Number("s", ge=0),
-        "flight_fit_settle": Number("s", ge=0),
-        "flight_fit_max_residual": Number("m", ge=0),
-        "bottom_hysteresis": Number("m/s", ge=0),
-        "touchdown_arming_clearance": Number("m", ge=0),
-        "acquire_velocity": Number("m/s", ge=0),
-        "acquire_clearance": Number("m", ge=0),
-        "acquire_window": Number("s", ge=0),
-        "acquire_velocity_std": Number("m/s", gt=0),
-        "track_velocity_std": Number("m/s", gt=0),
-        "max_state_spacing": Number("s", ge=0),
-        "sample_deadline": Number("s", ge=0),
-    }, checks=(_acquire_below_track,)),
-})})
+class Estimator(Section):
+    vertical_process_noise: float = unit("m s^-2.5", gt=0)
+    horizontal_process_noise: float = unit("m s^-2.5", gt=0)
+    measurement_noise: Literal["quantization", "thesis"]
+    quantization_std_counts: float = unit("counts", gt=0)
+    leg_process_noise: float = unit("rad s^-1.5", gt=0)
+    initial_velocity_std: float = unit("m/s", ge=0)
+    initial_acceleration_std: float = unit("m/s^2", ge=0)
+    initial_leg_rate_std: float = unit("rad/s", ge=0)
+    outlier_gate: float = unit("sigma", gt=0)
+    reinitialise_after: int = unit("samples", ge=1)
+    max_prediction_gap: float = unit("s", gt=0)
+    clock_drift_rate: float = unit("s/s", ge=0)
+    clock_max_error: float = unit("s", ge=0)
+    clock_max_lag: float = unit("s", ge=0)
+    clock_reanchor_after: float = unit("s", ge=0)
+
+
+class Detector(Section):
+    pre_touchdown_height: float = unit("m", ge=0)
+    pre_touchdown_lead: float = unit("s", ge=0)
+    flight_fit_settle: float = unit("s", ge=0)
+    flight_fit_max_residual: float = unit("m", ge=0)
+    bottom_hysteresis: float = unit("m/s", ge=0)
+    touchdown_arming_clearance: float = unit("m", ge=0)
+    acquire_velocity: float = unit("m/s", ge=0)
+    acquire_clearance: float = unit("m", ge=0)
+    acquire_window: float = unit("s", ge=0)
+    acquire_velocity_std: float = unit("m/s", gt=0)
+    track_velocity_std: float = unit("m/s", gt=0)
+    max_state_spacing: float = unit("s", ge=0)
+    sample_deadline: float = unit("s", ge=0)
+
+    @model_validator(mode="after")
+    def _acquire_below_track(self):
+        at_most(self, "acquire_velocity_std", "track_velocity_std", "m/s")
+        return self
+
+
+class Sensing(Section):
+    hardware_file: str
+    model_file: str
+    diagnostics_period: float = unit("s", gt=0)
+    queue_depth: int = unit("samples", ge=1)
+    bridge: Bridge
+    estimator: Estimator
+    detector: Detector
+
+
+class SENSING(Section):
+    sensing: Sensing
 
 # ------------------------------------------------------------------------------------ control.yaml
+
 
 PREDICTORS = ("aas", "corrected", "exact")
 # identification's: the model library's predictors and "lanes" (the laws with library effects)
 IDENTIFICATION_PREDICTORS = PREDICTORS + ("lanes",)
 
-CONTROL = Section({
-    "deadbeat": Section({
-        "predictor": Text(choices=PREDICTORS),
-        "angle_span": Number("rad", gt=0, lt=PI_2),
-        "angle_points": Number(ge=3, le=1000, integer=True),
-        "torque_step": Number("N m", gt=0),
-        "min_torque": Number("N m", ge=0),
-        "max_torque": Number("N m", gt=0),
-        "min_angle": Number("rad", ge=0, lt=PI_2),
-        "max_angle": Number("rad", gt=0, lt=PI_2),
-        "initial_torque": Number("N m", ge=0),
-        "adaptation": Flag(),
-        "adaptation_gain": Number(ge=0, le=1),
-        "max_bias_height": Number("m", ge=0),
-        "max_bias_speed": Number("m/s", ge=0),
-    }, checks=(ordered("min_torque", "max_torque"), ordered("min_angle", "max_angle"),
-               within("initial_torque", "min_torque", "max_torque"))),
-    "stride": Section({
-        "ramp_ahead": Flag(default=False),
-        "touchdown_grace": Number("s", gt=0, default=0.02),
-        "keep_alive": Number("s", gt=0, le=0.1, default=0.003),
-        "executor_timeout": Number("s", gt=0, default=0.02),
-        "sensing_timeout": Number("s", gt=0, default=0.5),
-        "keep_alive_priority_boost": Number(ge=0, le=49, integer=True, default=10),
-    }, default={"ramp_ahead": False, "touchdown_grace": 0.02, "keep_alive": 0.003, "executor_timeout": 0.02,
-                "sensing_timeout": 0.5, "keep_alive_priority_boost": 10}),
-})
+
+class Deadbeat(Section):
+    predictor: Literal[PREDICTORS]
+    angle_span: float = unit("rad", gt=0, lt=PI_2)
+    angle_points: int = Field(ge=3, le=1000)
+    torque_step: float = unit("N m", gt=0)
+    min_torque: float = unit("N m", ge=0)
+    max_torque: float = unit("N m", gt=0)
+    min_angle: float = unit("rad", ge=0, lt=PI_2)
+    max_angle: float = unit("rad", gt=0, lt=PI_2)
+    initial_torque: float = unit("N m", ge=0)
+    adaptation: bool
+    adaptation_gain: float = Field(ge=0, le=1)
+    max_bias_height: float = unit("m", ge=0)
+    max_bias_speed: float = unit("m/s", ge=0)
+
+    @model_validator(mode="after")
+    def _ranges(self):
+        ordered(self, "min_torque", "max_torque")
+        ordered(self, "min_angle", "max_angle")
+        within(self, "initial_torque", "min_torque", "max_torque")
+        return self
+
+
+class Stride(Section):
+    ramp_ahead: bool = False
+    touchdown_grace: float = unit("s", 0.02, gt=0)
+    keep_alive: float = unit("s", 0.003, gt=0, le=0.1)
+    executor_timeout: float = unit("s", 0.02, gt=0)
+    sensing_timeout: float = unit("s", 0.5, gt=0)
+    keep_alive_priority_boost: int = Field(10, ge=0, le=49)
+
+
+class CONTROL(Section):
+    deadbeat: Deadbeat
+    stride: Stride = Field(default_factory=Stride)
 
 # ------------------------------------------------------------------------------------ motor_driver.yaml
 
 
-def _timeout_above_sync(values: dict):
-    if "command_timeout" in values and "sync_period" in values and values["command_timeout"] <= values["sync_period"]:
-        return "command_timeout", (f"must be longer than sync_period ({values['sync_period']:g} s), "
-                                   f"got {values['command_timeout']:g}")
-    return None
+class MOTOR_DRIVER_SECTION(Section):
+    hardware_file: str = None
+    sync_period: float = unit("s", None, gt=0, le=0.1)
+    max_ramp_age: float = unit("s", None, ge=0)
+    rpdo_refresh: float = unit("s", None, ge=0)
+    command_timeout: float = unit("s", None, gt=0, le=10)
+    quick_stop_time: float = unit("s", None, ge=0)
+    heartbeat_timeout: float = unit("s", None, gt=0)
+    master_node_id: int = Field(None, ge=1, le=127)
+    master_heartbeat_period: float = unit("s", None, ge=0)
+    drive_consumer_time: float = unit("s", None, ge=0, le=65.535)
+    sdo_timeout: float = unit("s", None, gt=0)
+    startup_retry: float = unit("s", None, ge=0)
+    bus_error_holdoff: float = unit("s", None, ge=0)
+    fault_reset_attempts: int = Field(None, ge=1)
+    fault_reset_interval: float = unit("s", None, ge=0)
+    shutdown_timeout: float = unit("s", None, gt=0)
+    status_period: float = unit("s", None, gt=0)
+    status_decimation: int = Field(None, ge=1)
+    diagnostics_period: float = unit("s", None, gt=0)
+
+    @model_validator(mode="after")
+    def _timing(self):
+        if None not in (self.command_timeout, self.sync_period) and self.command_timeout <= self.sync_period:
+            raise Problem("command_timeout", f"must be longer than sync_period ({self.sync_period:g} s), "
+                                             f"got {self.command_timeout:g}")
+        consumer, period = self.drive_consumer_time or 0.0, self.master_heartbeat_period or 0.0
+        if consumer and not 0 < period < consumer:
+            raise Problem("master_heartbeat_period", f"must be positive and below drive_consumer_time ({consumer:g} "
+                                                     f"s), got {period:g}")
+        return self
 
 
-def _heartbeat_below_consumer(values: dict):
-    consumer, period = values.get("drive_consumer_time", 0.0), values.get("master_heartbeat_period", 0.0)
-    if consumer and not 0 < period < consumer:
-        return "master_heartbeat_period", (f"must be positive and below drive_consumer_time ({consumer:g} s), "
-                                           f"got {period:g}")
-    return None
-
-
-MOTOR_DRIVER_FIELDS = {
-    "hardware_file": Text(default=None),
-    "sync_period": Number("s", gt=0, le=0.1, default=None),
-    "max_ramp_age": Number("s", ge=0, default=None),
-    "rpdo_refresh": Number("s", ge=0, default=None),
-    "command_timeout": Number("s", gt=0, le=10, default=None),
-    "quick_stop_time": Number("s", ge=0, default=None),
-    "heartbeat_timeout": Number("s", gt=0, default=None),
-    "master_node_id": Number(ge=1, le=127, integer=True, default=None),
-    "master_heartbeat_period": Number("s", ge=0, default=None),
-    "drive_consumer_time": Number("s", ge=0, le=65.535, default=None),
-    "sdo_timeout": Number("s", gt=0, default=None),
-    "startup_retry": Number("s", ge=0, default=None),
-    "bus_error_holdoff": Number("s", ge=0, default=None),
-    "fault_reset_attempts": Number(ge=1, integer=True, default=None),
-    "fault_reset_interval": Number("s", ge=0, default=None),
-    "shutdown_timeout": Number("s", gt=0, default=None),
-    "status_period": Number("s", gt=0, default=None),
-    "status_decimation": Number(ge=1, integer=True, default=None),
-    "diagnostics_period": Number("s", gt=0, default=None),
-}
-MOTOR_DRIVER_SECTION = Section(MOTOR_DRIVER_FIELDS, checks=(_timeout_above_sync, _heartbeat_below_consumer))
-MOTOR_DRIVER = Section({"motor_driver": MOTOR_DRIVER_SECTION})
+class MOTOR_DRIVER(Section):
+    motor_driver: MOTOR_DRIVER_SECTION
 
 # ------------------------------------------------------------------------------------ identification.yaml
 
+
 FITTABLE = tuple(name for name in MODEL_FIELDS if name != "rest_length")
-
-
-def _bounds_ordered(values: dict):
-    for name, (low, high) in values.items():
-        if not low < high:
-            return name, f"must be [low, high] with low < high, got [{low:g}, {high:g}]"
-    return None
-
 
 # ModelParams field -> the laws.Coefficients field it sets (toe_mass through the collision factor)
 MODEL_COEFFICIENT = {"body_mass": "mass", "toe_mass": "collision_factor", "gravity": "gravity",
@@ -299,95 +357,119 @@ def check_effects(names, fitted) -> tuple[str, ...]:
     return names
 
 
-def _effects_identifiable(values: dict):
-    """The effects are library physics entries, named once, none setting a parameter `fitted` fits."""
-    if not values.get("effects"):
-        return None
-    try:
-        check_effects(values["effects"], values.get("fitted", ()))
-    except ValueError as exc:
-        text = str(exc)
-        return "effects", text[len("effects: "):] if text.startswith("effects: ") else text
-    return None
+def _bounds_ordered(bounds: dict) -> dict:
+    for name, (low, high) in bounds.items():
+        if not low < high:
+            raise Problem(name, f"must be [low, high] with low < high, got [{low:g}, {high:g}]")
+    return bounds
 
 
-IDENTIFICATION = Section({"identification": Section({
-    "predictor": Text(choices=IDENTIFICATION_PREDICTORS, default="aas"),
-    "folds": Number(ge=2, integer=True),
-    "seed": Number(ge=0, integer=True, default=0),
-    "fitted": Items(Text(choices=FITTABLE), min_items=1, unique=True),
-    "initial": Section(MODEL_FIELDS),
-    "bounds": Section(values=Items(Number(gt=0), min_items=2, max_items=2), keys=FITTABLE, checks=(_bounds_ordered,)),
-    "nelder_mead": Section({
-        "initial_step": Number("log units", gt=0, default=None),
-        "xatol": Number("log units", gt=0, default=None),
-        "fatol": Number("%", gt=0, default=None),
-        "max_evaluations": Number(ge=10, integer=True, default=None),
-        "restarts": Number(ge=0, integer=True, default=None),
-    }, default={}),
-    "exact": Section({
-        "defect_iterations": Number(ge=0, integer=True, default=None),
-        "defect_step": Number("log units", gt=0, default=None),
-        "defect_tolerance": Number("log units", gt=0, default=None),
-        "polish_evaluations": Number(ge=0, integer=True, default=None),
-        "polish_step": Number("log units", gt=0, default=None),
-    }, default={}),
-    "effects": Items(Text(), unique=True, default=[],
-                     doc="library effects (hopper_ros/physics/effects.py) fitted with the model by the lanes predictor"),
-    "lanes": Section({
-        "step": Number("s", gt=0, le=0.002, default=None),
-        "duration_factor": Number(ge=1, default=None),
-        "fd_step": Number("log units or share of the search range", gt=0, lt=0.1, default=None),
-        "max_iterations": Number(ge=1, integer=True, default=None),
-        "initial_radius": Number("log units", gt=0, default=None),
-        "xtol": Number(gt=0, default=None),
-        "ftol": Number(gt=0, default=None),
-        "polish_iterations": Number(ge=0, integer=True, default=None),
-        "batch_lanes": Number("lanes", ge=1, integer=True, default=None),
-    }, default={}),
-    "failed_stride_error_pct": Number("%", ge=0, default=100.0),
-    "extraction": Section({
-        "apex_window": Number("s", gt=0, default=None),
-        "speed_window": Number("s", gt=0, default=None),
-        "min_apex_points": Number(ge=3, integer=True, default=None),
-        "edge_guard": Number("s", ge=0, default=None),
-        "min_phase": Number("s", ge=0, default=None),
-        "touchdown_samples": Number(ge=1, integer=True, default=None),
-        "zero_torque": Number("N m", ge=0, default=None),
-        "torque_skip": Number("s", ge=0, default=None),
-        "max_ramp_duration": Number("s", gt=0, default=None),
-        "max_stance_time": Number("s", gt=0, default=None),
-        "min_forward_speed": Number("m/s", ge=0, default=None),
-    }, default={}),
-    "grf": Section({
-        "sigma_jerk": Number("m/s^3", gt=0, default=None),
-        "position_noise": Number("m", gt=0, default=None),
-        "moving_average": Number("samples", ge=1, integer=True, default=None),
-        "apex_height": Number("m", gt=0, default=None),
-        "forward_speed": Number("m/s", default=None),
-        "touchdown_angle_deg": Number("deg", gt=-90, lt=90, default=None),
-        "tau_0": Number("N m", default=None),
-    }, default={}),
-}, checks=(_effects_identifiable,))})
+Fittable = Literal[FITTABLE]
+Positive = Annotated[float, Field(gt=0)]
+
+
+class NelderMead(Section):
+    initial_step: float = unit("log units", None, gt=0)
+    xatol: float = unit("log units", None, gt=0)
+    fatol: float = unit("%", None, gt=0)
+    max_evaluations: int = Field(None, ge=10)
+    restarts: int = Field(None, ge=0)
+
+
+class Exact(Section):
+    defect_iterations: int = Field(None, ge=0)
+    defect_step: float = unit("log units", None, gt=0)
+    defect_tolerance: float = unit("log units", None, gt=0)
+    polish_evaluations: int = Field(None, ge=0)
+    polish_step: float = unit("log units", None, gt=0)
+
+
+class Lanes(Section):
+    step: float = unit("s", None, gt=0, le=0.002)
+    duration_factor: float = Field(None, ge=1)
+    fd_step: float = unit("log units or share of the search range", None, gt=0, lt=0.1)
+    max_iterations: int = Field(None, ge=1)
+    initial_radius: float = unit("log units", None, gt=0)
+    xtol: float = Field(None, gt=0)
+    ftol: float = Field(None, gt=0)
+    polish_iterations: int = Field(None, ge=0)
+    batch_lanes: int = unit("lanes", None, ge=1)
+
+
+class Extraction(Section):
+    apex_window: float = unit("s", None, gt=0)
+    speed_window: float = unit("s", None, gt=0)
+    min_apex_points: int = Field(None, ge=3)
+    edge_guard: float = unit("s", None, ge=0)
+    min_phase: float = unit("s", None, ge=0)
+    touchdown_samples: int = Field(None, ge=1)
+    zero_torque: float = unit("N m", None, ge=0)
+    torque_skip: float = unit("s", None, ge=0)
+    max_ramp_duration: float = unit("s", None, gt=0)
+    max_stance_time: float = unit("s", None, gt=0)
+    min_forward_speed: float = unit("m/s", None, ge=0)
+
+
+class Grf(Section):
+    sigma_jerk: float = unit("m/s^3", None, gt=0)
+    position_noise: float = unit("m", None, gt=0)
+    moving_average: int = unit("samples", None, ge=1)
+    apex_height: float = unit("m", None, gt=0)
+    forward_speed: float = unit("m/s", None)
+    touchdown_angle_deg: float = unit("deg", None, gt=-90, lt=90)
+    tau_0: float = unit("N m", None)
+
+
+class Identification(Section):
+    predictor: Literal[IDENTIFICATION_PREDICTORS] = "aas"
+    folds: int = Field(ge=2)
+    seed: int = Field(0, ge=0)
+    fitted: Annotated[list[Fittable], DISTINCT] = Field(min_length=1)
+    initial: ModelParameters
+    bounds: Annotated[dict[Fittable, Annotated[list[Positive], Field(min_length=2, max_length=2)]],
+                      AfterValidator(_bounds_ordered)]
+    nelder_mead: NelderMead = Field(default_factory=NelderMead)
+    exact: Exact = Field(default_factory=Exact)
+    effects: Annotated[list[str], DISTINCT] = Field(
+        [], description="library effects (hopper_ros/physics/effects.py) fitted with the model by the lanes predictor")
+    lanes: Lanes = Field(default_factory=Lanes)
+    failed_stride_error_pct: float = unit("%", 100.0, ge=0)
+    extraction: Extraction = Field(default_factory=Extraction)
+    grf: Grf = Field(default_factory=Grf)
+
+    @model_validator(mode="after")
+    def _effects_identifiable(self):
+        """The effects are library physics entries, named once, none setting a parameter `fitted` fits."""
+        if self.effects:
+            try:
+                check_effects(self.effects, self.fitted)
+            except ValueError as exc:
+                raise Problem("effects", str(exc).removeprefix("effects: ")) from None
+        return self
+
+
+class IDENTIFICATION(Section):
+    identification: Identification
 
 # ------------------------------------------------------------------------------------ setpoint schedules
 
 
-def _strides_or_seconds(values: dict):
-    if values.get("strides") is not None and values.get("seconds") is not None:
-        return "seconds", "give either strides or seconds, not both"
-    return None
+class Segment(Section):
+    apex_height: float = unit("m", gt=0)
+    forward_speed: float = unit("m/s")
+    strides: int = Field(None, ge=1)
+    seconds: float = unit("s", None, gt=0)
+
+    @model_validator(mode="after")
+    def _strides_or_seconds(self):
+        if self.strides is not None and self.seconds is not None:
+            raise Problem("seconds", "give either strides or seconds, not both")
+        return self
 
 
-SCHEDULE = Section({
-    "segments": Items(Section({
-        "apex_height": Number("m", gt=0),
-        "forward_speed": Number("m/s"),
-        "strides": Number(ge=1, integer=True, default=None),
-        "seconds": Number("s", gt=0, default=None),
-    }, checks=(_strides_or_seconds,)), min_items=1),
-    "repeat": Flag(default=False),
-})
+class SCHEDULE(Section):
+    segments: list[Segment] = Field(min_length=1)
+    repeat: bool = False
 
 
 # ------------------------------------------------------------------------------------ loaders

@@ -69,12 +69,11 @@ class DeadbeatSettings:
     def from_mapping(cls, values: Mapping[str, Any], source: str = "deadbeat settings") -> "DeadbeatSettings":
         """Settings from a `deadbeat` section (missing keys: the defaults), checked by the schema of
         control.yaml (hopper_ros.config.schemas.CONTROL): types, ranges with units, min < max."""
-        from hopper_ros.config.schemas import CONTROL
-        from hopper_ros.config.schema import Section, validate
+        from hopper_ros.config.schemas import Deadbeat
+        from hopper_ros.config.schema import validate
 
         defaults = {name: getattr(cls, name) for name in cls.__dataclass_fields__}
-        section = Section({"deadbeat": CONTROL.fields["deadbeat"]})
-        return cls(**validate(section, {"deadbeat": {**defaults, **dict(values)}}, source)["deadbeat"])
+        return cls(**validate(Deadbeat, {**defaults, **dict(values)}, source, at="deadbeat"))
 
 
 @dataclass

@@ -1,10 +1,14 @@
-"""The statistics that decide what the mismatch tool names (config/diagnosis.yaml, docs/diagnosis.md)."""
+"""The statistics that decide what the mismatch tool names (config/diagnosis.yaml, docs/diagnosis.md):
+`Settings`, and DIAGNOSIS, the file's schema (a pydantic model made of Settings' fields and defaults
+with the ranges of LIMITS), through which `load_settings` reads it."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
-from hopper_ros.config import load_yaml
+from pydantic import create_model
+
+from hopper_ros.config.schema import Section, load_config, unit
 
 
 @dataclass
@@ -40,16 +44,31 @@ class Settings:
     secondary_grid: int = 5          # values of an accepted entry's secondary parameter tried (geometric)
 
 
+_SHARE = {"ge": 0, "le": 1}
+_COUNT = {"ge": 1}
+#: the range of each key of diagnosis.yaml (and its unit)
+LIMITS = {
+    "folds": {"ge": 2}, "grid": {"ge": 2}, "min_strides": {"ge": 2}, "max_effects": _COUNT,
+    "min_reduction": _SHARE, "min_total_reduction": _SHARE, "min_t": {"ge": 0}, "apex_tolerance": _SHARE,
+    "apex_improvement": _SHARE, "sensor_alone": _SHARE, "sensor_margin": _SHARE, "discovery_margin": _SHARE,
+    "margin_residual": _SHARE, "near_full": _SHARE, "tie_t": {"ge": 0}, "tie_share": _SHARE,
+    "locate_threshold": {"gt": 0}, "screen": _COUNT, "screen_strides": _COUNT, "liftoff_window": {"gt": 0, "unit": "s"},
+    "exchange": {"ge": 0}, "polish": {"ge": 0}, "restarts": {"ge": 0}, "restart_threshold": {"gt": 0},
+    "trajectory_threshold": {"gt": 0}, "floor_factor": {"gt": 0}, "drift_share": _SHARE,
+    "explained_left_pct": {"ge": 0, "le": 100, "unit": "%"}, "secondary_grid": _COUNT,
+}
+
+
+def _key(name: str, default):
+    limits = dict(LIMITS[name])
+    return type(default), unit(limits.pop("unit", ""), default, **limits)
+
+
+DIAGNOSIS = create_model("DIAGNOSIS", __base__=Section, diagnosis=(
+    create_model("Diagnosis", __base__=Section, **{f.name: _key(f.name, f.default) for f in fields(Settings)}), ...))
+
+
 def load_settings(path="diagnosis.yaml") -> Settings:
-    data = load_yaml(path)
-    values = data.get("diagnosis", data) if isinstance(data, dict) else None
-    if not isinstance(values, dict):
-        raise ValueError(f"{path}: expected a mapping under `diagnosis:`")
-    known = {f for f in Settings.__dataclass_fields__}
-    unknown = sorted(set(values) - known)
-    if unknown:
-        raise ValueError(f"{path}: diagnosis: unknown key(s) {unknown}; known: {sorted(known)}")
-    try:
-        return Settings(**{k: type(getattr(Settings, k))(v) for k, v in values.items()})
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{path}: diagnosis: {exc}") from None
+    """diagnosis.yaml (a config/ name or a path), checked by DIAGNOSIS: a ConfigError line naming the
+    file and the key otherwise."""
+    return Settings(**load_config(path, DIAGNOSIS)["diagnosis"])

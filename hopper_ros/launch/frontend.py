@@ -1,6 +1,6 @@
 """The launch files of `hopper launch`: ros2 launch's YAML front end (launch_yaml with launch_ros's
 `node` and `node_container`) parsed into the processes to start (`LaunchDescription` of `ChildSpec`),
-every key checked, substitutions and conditions applied. What of the format is supported:
+every key checked (the pydantic models of hopper_ros/launch/entities.py), substitutions and conditions applied. What of the format is supported:
 hopper_ros/launch/__init__.py. No ROS import.
 """
 
@@ -22,22 +22,13 @@ from hopper_ros.config import config_path, launch_dir, package_share_dir
 from hopper_ros.runtime.environment import (REALTIME_PRIORITY_VAR, RosEnvironmentError, apply_ros_environment, cpu_index,
                                             realtime_priority)
 
+from .entities import (ENTITIES, ComposableNode, LaunchFileError, NameValue, NestedParamFile, Param, ParamFile,
+                       Remap, check_keys)
 from .supervisor import DEFAULT_SIGINT_TIMEOUT, DEFAULT_SIGTERM_TIMEOUT, ChildSpec
 
 PACKAGE = "hopper_ros"
-_ENTITIES = ("arg", "let", "node", "node_container")
 CONTAINER = "component_container"   # our container executable (hopper_ros/nodes/component_container.py)
-_NODE_KEYS = {"pkg", "exec", "name", "namespace", "param", "remap", "env", "args", "ros_args", "output", "on_exit",
-              "sigterm_timeout", "sigkill_timeout", "if", "unless", "respawn", "respawn_delay"}
-_CONTAINER_KEYS = (_NODE_KEYS - {"args"}) | {"composable_node"}
-_COMPOSABLE_KEYS = {"pkg", "plugin", "name", "namespace", "param", "remap", "extra_arg", "if", "unless"}
-_ARG_KEYS = {"name", "default", "description", "if", "unless"}
-_LET_KEYS = {"name", "value", "if", "unless"}
 _OUTPUTS = {"screen", "log", "both", "own_log"}
-
-
-class LaunchFileError(ValueError):
-    """A launch file that cannot be used, with the file and entry named."""
 
 
 @dataclass
@@ -179,23 +170,16 @@ def _entity_list(value: Any, key: str, where: str) -> list[dict]:
     return value
 
 
-def _check_keys(entity: dict, known: set[str], kind: str, where: str) -> None:
-    unknown = sorted(set(entity) - known)
-    if unknown:
-        raise LaunchFileError(f"{where}: unknown key(s) {', '.join(map(repr, unknown))} of '{kind}' "
-                              f"(hopper launch supports: {', '.join(sorted(known))})")
-
-
 def _params(context: _Context, items: list[dict], prefix: str, where: str, out: list[str]) -> None:
     for item in items:
         if "from" in item:
-            _check_keys(item, {"from", "allow_substs"} if not prefix else {"from"}, "param", where)
+            check_keys(item, NestedParamFile if prefix else ParamFile, "param", where)
             if prefix:
                 raise LaunchFileError(f"{where}: a parameter file ('from') cannot be nested")
             path = _resolve_file(context.substitute(item["from"], where), context.base_dir, where)
             out += ["--params-file", str(path)]
             continue
-        _check_keys(item, {"name", "value", "param"}, "param", where)
+        check_keys(item, Param, "param", where)
         name = _string(context, item, "name", where, required=True)
         full = f"{prefix}.{name}" if prefix else name
         if ("value" in item) == ("param" in item):
@@ -259,7 +243,7 @@ def _params_and_remaps(context: _Context, entity: dict, where: str, ros_args: li
     if "param" in entity:
         _params(context, _entity_list(entity["param"], "param", where), "", where, ros_args)
     for item in _entity_list(entity["remap"], "remap", where) if "remap" in entity else []:
-        _check_keys(item, {"from", "to"}, "remap", where)
+        check_keys(item, Remap, "remap", where)
         ros_args += ["-r", f"{_string(context, item, 'from', where, True)}:={_string(context, item, 'to', where, True)}"]
 
 
@@ -273,7 +257,7 @@ def _composable_node(context: _Context, entity: Any, where: str) -> tuple[dict, 
 
     if not isinstance(entity, dict):
         raise LaunchFileError(f"{where}: a composable_node is a mapping of its attributes")
-    _check_keys(entity, _COMPOSABLE_KEYS, "composable_node", where)
+    check_keys(entity, ComposableNode, "composable_node", where)
     if not context.condition(entity, where):
         return None
     package = _string(context, entity, "pkg", where, required=True)
@@ -290,7 +274,7 @@ def _composable_node(context: _Context, entity: Any, where: str) -> tuple[dict, 
     _params_and_remaps(context, entity, where, args)
     intra_process = False
     for item in _entity_list(entity["extra_arg"], "extra_arg", where) if "extra_arg" in entity else []:
-        _check_keys(item, {"name", "value"}, "extra_arg", where)
+        check_keys(item, NameValue, "extra_arg", where)
         key, value = _string(context, item, "name", where, True), str(item.get("value", "")).strip().lower()
         if key != "use_intra_process_comms" or value not in ("true", "false"):
             raise LaunchFileError(f"{where}: extra_arg {key!r}: {value!r}: hopper launch supports only "
@@ -308,7 +292,7 @@ def _node(context: _Context, entity: dict, where: str, env: dict[str, str],
         raise LaunchFileError(f"{where}: 'realtime_priority' is not a key of ros2 launch's node: give the SCHED_FIFO "
                               f"priority as env [{{name: {REALTIME_PRIORITY_VAR}, value: \"N\"}}]")
     container = kind == "node_container"
-    _check_keys(entity, _CONTAINER_KEYS if container else _NODE_KEYS, kind, where)
+    check_keys(entity, ENTITIES[kind], kind, where)
     package = _string(context, entity, "pkg", where, required=True)
     executable = _string(context, entity, "exec", where, required=True)
     if container and (package, executable) != (PACKAGE, CONTAINER):
@@ -356,7 +340,7 @@ def _node(context: _Context, entity: dict, where: str, env: dict[str, str],
     if "env" in entity:
         child_env = dict(env)
         for item in _entity_list(entity["env"], "env", where):
-            _check_keys(item, {"name", "value"}, "env", where)
+            check_keys(item, NameValue, "env", where)
             child_env[_string(context, item, "name", where, True)] = _string(context, item, "value", where) or ""
         try:
             realtime_priority(child_env)
@@ -376,7 +360,7 @@ def parse_launch(data: Any, source: str = "<launch>", base_dir: Path | None = No
         raise LaunchFileError(f"{source}: expected one root key 'launch' (ros2 launch's YAML format), found {found}")
     entities = data["launch"]
     if not isinstance(entities, list) or not entities:
-        raise LaunchFileError(f"{source}: 'launch' must be a non-empty list of entities ({', '.join(_ENTITIES)})")
+        raise LaunchFileError(f"{source}: 'launch' must be a non-empty list of entities ({', '.join(ENTITIES)})")
     context = _Context(source, base_dir, arguments or {})
     env = _child_env()
     children: list[ChildSpec] = []
@@ -385,16 +369,16 @@ def parse_launch(data: Any, source: str = "<launch>", base_dir: Path | None = No
     for index, item in enumerate(entities, start=1):
         where = f"{source}: entry {index}"
         if not isinstance(item, dict) or len(item) != 1:
-            raise LaunchFileError(f"{where}: an entity is a mapping with one key, its type ({', '.join(_ENTITIES)})")
+            raise LaunchFileError(f"{where}: an entity is a mapping with one key, its type ({', '.join(ENTITIES)})")
         (kind, entity), = item.items()
-        if kind not in _ENTITIES:
+        if kind not in ENTITIES:
             raise LaunchFileError(f"{where}: entity '{kind}' is not supported by hopper launch "
-                                  f"(supported: {', '.join(_ENTITIES)})")
+                                  f"(supported: {', '.join(ENTITIES)})")
         if not isinstance(entity, dict):
             raise LaunchFileError(f"{where}: '{kind}' must be a mapping of its attributes")
         where = f"{where} ({kind})"
         if kind == "arg":
-            _check_keys(entity, _ARG_KEYS, kind, where)
+            check_keys(entity, ENTITIES[kind], kind, where)
             name = _string(context, entity, "name", where, required=True)
             if not context.condition(entity, where):
                 continue
@@ -406,7 +390,7 @@ def parse_launch(data: Any, source: str = "<launch>", base_dir: Path | None = No
             else:
                 raise LaunchFileError(f"{where}: launch argument {name!r} is required: give it as {name}:=VALUE")
         elif kind == "let":
-            _check_keys(entity, _LET_KEYS, kind, where)
+            check_keys(entity, ENTITIES[kind], kind, where)
             name = _string(context, entity, "name", where, required=True)
             if context.condition(entity, where):
                 context.configurations[name] = _string(context, entity, "value", where, required=False) or ""

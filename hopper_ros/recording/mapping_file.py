@@ -12,7 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hopper_ros.config.schema import ConfigError, Number, Section, Text
+from pydantic import Field, create_model, field_validator
+
+from hopper_ros.config.schema import ConfigError, Problem, Section, unit
 
 CHANNELS = ("y", "z", "theta", "tau")
 UNITS = {        # kind -> unit -> factor to SI
@@ -23,44 +25,44 @@ UNITS = {        # kind -> unit -> factor to SI
 }
 KIND = {"y": "length", "z": "length", "theta": "angle", "tau": "torque", "t": "time"}
 
-_CHANNEL = Section({
-    "topic": Text(default=None, doc="bag topic"),
-    "field": Text(default=None, doc="field path in the topic's messages"),
-    "column": Text(default=None, doc="CSV column"),
-    "unit": Text(doc="unit of value * scale"),
-    "scale": Number(default=1.0),
-    "offset": Number(default=0.0, doc="added after the conversion to SI"),
-})
-_TIME = Section({"column": Text(), "unit": Text(default="s")})
+BAG_TIMES = ("header", "receive")
 
 
-def _rate(value, where: str):
-    if value == "recorded":
-        return None
-    return Number("Hz", gt=0, le=100000).check(value, where)
+class _Channel(Section):
+    topic: str = Field(None, description="bag topic")
+    field: str = Field(None, description="field path in the topic's messages")
+    column: str = Field(None, description="CSV column")
+    unit: str = Field(description="unit of value * scale")
+    scale: float = 1.0
+    offset: float = Field(0.0, description="added after the conversion to SI")
 
 
-class _Rate:
-    default = 1000.0
-
-    def check(self, value, where):
-        return _rate(value, where)
+class _TimeColumn(Section):
+    column: str
+    unit: str = "s"
 
 
-class _TimeSpec:
-    default = "header"
+class _Import(Section):
+    rate: float = unit("Hz", 1000.0, gt=0, le=100000, description="target rate; `recorded`: as recorded (None)")
+    time: _TimeColumn = Field("header", description="a bag's header or receive stamps, or a CSV's time column")
+    channels: create_model("Channels", __base__=Section, **{name: (_Channel, ...) for name in CHANNELS})
 
-    def check(self, value, where):
-        if isinstance(value, str):
-            return Text(choices=("header", "receive")).check(value, where)
-        return _TIME.check(value, where)
+    @field_validator("rate", mode="wrap")
+    @classmethod
+    def _as_recorded(cls, value, handler):
+        return None if value == "recorded" else handler(value)
+
+    @field_validator("time", mode="wrap")
+    @classmethod
+    def _bag_time(cls, value, handler):
+        if not isinstance(value, str):
+            return handler(value)
+        if value not in BAG_TIMES:
+            raise Problem(None, f"must be one of {list(BAG_TIMES)}, got {value!r}")
+        return value
 
 
-SCHEMA = Section({"import": Section({
-    "rate": _Rate(),
-    "time": _TimeSpec(),
-    "channels": Section({name: _CHANNEL for name in CHANNELS}),
-})})
+SCHEMA = create_model("SCHEMA", __base__=Section, **{"import": (_Import, ...)})
 
 
 @dataclass(frozen=True)
