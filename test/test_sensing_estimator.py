@@ -211,7 +211,7 @@ def _stamp_errors(est, packets):
 
 
 def test_stamps_follow_a_simulated_robot_that_skipped_time():
-    """Issue 29: the simulated robot, stalled beyond sim/runner.py's RESYNC_PERIODS, drops the time
+    """Issue 29: the simulated robot, stalled beyond sim/runner.py's RESYNC_AFTER, drops the time
     it missed: its microcontroller clock then runs 80 ms behind the host clock for good, and every
     packet arrives 80 ms after its instant on the old mapping. The stamps must follow within
     clock_max_error (a few ms) once clock_reanchor_after of packets showed it, not drift 0.5 ms/s."""

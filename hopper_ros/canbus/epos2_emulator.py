@@ -22,7 +22,9 @@ EMCY and the error history, CiA 402 device control and the modes' regulation.
 from __future__ import annotations
 
 import logging
+import math
 import struct
+from collections import deque
 
 import can
 
@@ -49,6 +51,9 @@ _MS = 1.0e-3                       # [s/ms]
 #: time constant of the "averaged" feedback objects 0x2027 / 0x2028 [s] (emulation choice)
 AVERAGING_TIME_CONSTANT = 0.01
 _ENABLED_STATES = (State.OPERATION_ENABLED,)
+SYNC_INTERVAL_GUESS = 0.001       # [s] the SYNC period assumed until SYNCs came (the demo's 1 kHz)
+SYNC_INTERVAL_MAX = 0.01          # [s] SYNCs further apart than this are no period (a pause, the start)
+SYNC_INTERVALS_KEPT = 63          # the SYNC period is their median
 _SAMPLE_TOLERANCE = 0.999          # a control() call this close to one loop period counts as one
 
 # The drive's side of CiA 402 device control: a command is (controlword mask, value); per state, the
@@ -78,6 +83,9 @@ class Epos2Emulator:
         self._table = od.object_dictionary(self.node_id)
         self._indices = {index for index, _ in self._table}
         self.counters = Counters()
+        self._syncs_to_discard = 0           # discard_syncs: the next SYNCs came while the drive stood still
+        self._sync_intervals: deque[float] = deque(maxlen=SYNC_INTERVALS_KEPT)   # [s] between SYNCs (drive time)
+        self._last_sync = -math.inf
         self.regulator = PositionRegulator.from_hardware(hardware)
         self._values: dict[tuple[int, int], int | str] = {}
         self.sdo = SdoServer(self.node_id, self, self._send, self.counters, MAX_SEGMENTED_SIZE)
@@ -171,8 +179,10 @@ class Epos2Emulator:
 
     # ---------------------------------------------------------------- bus input
 
-    def poll(self, now: float) -> None:
-        """Handle every frame pending on the bus."""
+    def poll(self, now: float, one_sync: bool = False) -> None:
+        """Handle every frame pending on the bus; with `one_sync`, up to and including the first SYNC
+        (the simulated robot catching up on a short stall runs one SYNC period a step, the drive then
+        applying each RPDO at its own SYNC as it would have on time)."""
         while True:
             try:
                 msg = self.bus.recv(timeout=0)
@@ -182,14 +192,26 @@ class Epos2Emulator:
             if msg is None:
                 return
             try:
-                self._handle(msg, now)
+                if self._handle(msg, now) and one_sync:
+                    return
             except Exception:                    # never let one frame kill the drive
                 self.counters.malformed_frames += 1
                 log.exception("EPOS2 emulator: frame %s not handled", msg)
 
-    def _handle(self, msg: can.Message, now: float) -> None:
+    def discard_syncs(self, duration: float) -> None:
+        """The drive stood still for `duration` [s] (the simulated robot's process stopped and its world
+        with it): the SYNCs of that time, the next ones it takes, came while it did not run, so none
+        of them is answered (`counters.syncs_missed`; counted by the SYNC period seen, as they may
+        still be in transit). The motor driver counts the SYNCs left unanswered as the time the robot
+        stood still."""
+        intervals = sorted(self._sync_intervals)
+        period = intervals[len(intervals) // 2] if intervals else SYNC_INTERVAL_GUESS   # a missed one is no period
+        self._syncs_to_discard += max(0, round(duration / period))
+
+    def _handle(self, msg: can.Message, now: float) -> bool:
+        """Handle one frame; True if it was a SYNC."""
         if msg.is_error_frame or msg.is_extended_id:
-            return                               # not CANopen traffic
+            return False                         # not CANopen traffic
         cob = msg.arbitration_id
         data = bytes(msg.data)
         if cob == od.NMT_COB_ID:
@@ -204,7 +226,15 @@ class Epos2Emulator:
         if cob == od.sdo_rx_cob_id(self.node_id):
             self.sdo.on_frame(data)
         elif cob == int(self._values[(od.COB_ID_SYNC, 0)]) & od.COB_ID_MASK_11BIT:
+            if self._syncs_to_discard > 0:
+                self._syncs_to_discard -= 1
+                self.counters.syncs_missed += 1
+                return True
+            if 0.0 < now - self._last_sync < SYNC_INTERVAL_MAX:
+                self._sync_intervals.append(now - self._last_sync)
+            self._last_sync = now
             self.pdos.on_sync(data, now)
+            return True
         elif self.pdos.rpdo_number(cob) is not None:
             self.pdos.on_rpdo(self.pdos.rpdo_number(cob), data, now)
         else:

@@ -12,7 +12,10 @@ instant out. The deadbeat_controller node wires its topics to it; the in-process
 - With `ramp_ahead` the ramp goes out at the pre-touchdown event already, stamped with the
   touchdown predicted from that event's state (physics.flight.touchdown_time): zero current until
   then; the measured touchdown re-stamps it. No touchdown within `touchdown_grace` of the
-  predicted one cancels the ramp (zero current, counted).
+  predicted one cancels the ramp (zero current, counted). The grace is the robot's time: while the
+  motor driver says the drive stands still (it answers no SYNC: the simulated robot's process
+  stopped, `on_drive_silence`) the robot does not fly on, so no ramp is cancelled, and the time it
+  stood still moves the deadline (the driver moves the ramp by it too).
 - Single stride: `brake_disable_delay` after BRAKE began the drive is disabled (the robot sits back).
 - Hopping (past the first apex), no gait event for `sensing_timeout` (longer than any phase lasts):
   the sensing chain stopped or the robot lies still: the drive is disabled until events come again
@@ -96,6 +99,9 @@ class StridePolicy:
         self._last = (MODE_DISABLED, 0.0)
         self._last_sent = -math.inf
         self._sensed = math.nan         # when the last gait event or apex came (the caller's clock)
+        self._drive_silent = False      # the motor driver says the drive (the robot) stands still
+        self._frozen_time = 0.0         # [s] the time it stood still so far (the driver's count)
+        self._frozen_at_prediction = 0.0
         self._acknowledge = -math.inf   # a drive fault before the first stride: MODE_DISABLED until then
         self.sensing_lost = False
 
@@ -146,6 +152,7 @@ class StridePolicy:
         self.machine.on_pre_touchdown()
         self._predicted_touchdown = time + self.time_to_touchdown(z, z_dot, leg_angle, leg_angle_rate) \
             if self.settings.ramp_ahead else math.nan
+        self._frozen_at_prediction = self._frozen_time
         self._cancelled_ramp = False
 
     def time_to_touchdown(self, z: float, z_dot: float, leg_angle: float, leg_angle_rate: float) -> float:
@@ -166,6 +173,16 @@ class StridePolicy:
         if self.sensing_lost:
             self.sensing_lost = False
             self.events.append(("info", "gait events again: the drive follows the strides once more"))
+
+    def on_drive_silence(self, silent: bool, frozen_time: float) -> None:
+        """The motor driver's word on the drive: `silent` while it answers no SYNC (the robot stands
+        still), `frozen_time` [s] the time it stood still so far."""
+        self._drive_silent = bool(silent)
+        if not math.isfinite(frozen_time):
+            return
+        if frozen_time < self._frozen_time:      # a new motor driver (respawned) counts from 0
+            self._frozen_at_prediction = min(self._frozen_at_prediction, frozen_time)
+        self._frozen_time = frozen_time
 
     def on_drive_fault(self, message: str) -> bool:
         """The motor driver reports a drive fault or a lost drive: hold the leg, no torque. False
@@ -214,7 +231,8 @@ class StridePolicy:
             # the driver runs the ramp itself, from the touchdown time: jitter in the stream cannot shift it
             return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, *self._touchdown)
         if phase is Phase.PRE_TOUCHDOWN and plan is not None and math.isfinite(self._predicted_touchdown):
-            if now <= self._predicted_touchdown + s.touchdown_grace:
+            deadline = self._predicted_touchdown + s.touchdown_grace + self._frozen_time - self._frozen_at_prediction
+            if now <= deadline or self._drive_silent:
                 # scheduled ahead: zero current until the predicted touchdown, then the ramp
                 return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, self._predicted_touchdown)
             if not self._cancelled_ramp:

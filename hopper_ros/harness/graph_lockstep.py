@@ -12,8 +12,10 @@ to check the loop end to end (signs, units, timing) and by the benchmarks.
 The host clock: the packet sampled at simulated time t reaches the sensing chain at host time
 t + `host_delay(t)` (default 0; non-decreasing in t + delay). The controller and the motor driver's
 command ages run on it, as the nodes run on the host's clock: a step of the delay is the simulated
-robot skipping time (stalled beyond sim/runner.py's RESYNC_PERIODS), a large delay of the first
-packets a late start (issue 29). `GraphRun.stances` is the stance ramp as the leg felt it.
+robot's process stalled (beyond sim/runner.py's RESYNC_AFTER its world stands still and its drive
+answers none of the SYNCs meanwhile; a shorter stall is caught up, the following samples in a burst,
+the drive taking one SYNC period of frames a step), a large delay of the first packets a late start
+(issue 29). `GraphRun.stances` is the stance ramp as the leg felt it.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from hopper_ros.hardware.config import HardwareConfig
 from hopper_ros.sensing.pipeline import SensingPipeline
 from hopper_ros.sensing.samples import EventType
 from hopper_ros.sim.robot import SimRobot
+from hopper_ros.sim.runner import RESYNC_AFTER
 from hopper_ros.sim.stance import StanceTorque
 
 from hopper_ros.control.deadbeat import DeadbeatController, StrideDecision
@@ -63,6 +66,7 @@ class GraphLockstep:
         self.controller = controller
         self.policy = StridePolicy(controller, stride_settings or StrideSettings())
         self.host_delay = host_delay
+        self._catching_up = False
 
     def _now(self) -> float:
         return self.host_time
@@ -79,7 +83,7 @@ class GraphLockstep:
         self.policy.on_setpoint(height, speed)
 
     def step(self, run: GraphRun) -> None:
-        sample = self.robot.step()
+        sample = self.robot.step(self._catching_up)
         run.stances.add(sample, self.robot.current_mode)
         for event in sample.events:
             if event.kind == "apex":
@@ -88,18 +92,25 @@ class GraphLockstep:
                 run.fell = True
         period = self.robot.period
         arrival = max(self.host_time, sample.truth.t + self.host_delay(sample.truth.t))
-        while arrival - self.host_time > 1.5 * period:
-            # the simulated robot was frozen (or its packet late): the graph runs on without samples,
-            # the controller repeating its command, the driver sending SYNC to a drive that does not answer
-            self.host_time += period
-            self._command()
-            self._cycle()
+        gap = arrival - self.host_time
+        self._catching_up = gap < 0.5 * period           # samples in a burst: the robot runs behind
+        if gap > 1.5 * period:
+            # the simulated robot's process stalled: the graph runs on without samples, the controller
+            # repeating its command, the driver sending SYNC to a drive that does not answer
+            while arrival - self.host_time > 1.5 * period:
+                self.host_time += period
+                self._command()
+                self._cycle()
+            if gap > RESYNC_AFTER:                       # beyond it the world stood still (sim/runner.py):
+                self.robot.drive.discard_syncs(gap - period)   #   its SYNCs are never answered
+            else:                                        # a shorter stall is caught up, a SYNC period a step
+                self._catching_up = True
         self.host_time = arrival
         output = self.sensing.process(packet_format.encode(sample.packet), self.host_time)
         for event in output.events:
             self._on_event(event, run)
         self._command()                          # the node's repeats: a thread of their own, every period here
-        self._cycle()
+        self._cycle(sync=gap >= 0.5 * period)    # the driver's SYNC period runs on the host clock: none in a burst
 
     def _command(self) -> None:
         now = self.host_time
@@ -108,10 +119,12 @@ class GraphLockstep:
             self.driver.command(command.mode, command.setpoint, command.duration, now - command.time)
         self.policy.drain_events()
 
-    def _cycle(self) -> None:
-        self.driver.cycle()
+    def _cycle(self, sync: bool = True) -> None:
+        if sync:
+            self.driver.cycle()
         while (frame := self._master_bus.recv(timeout=0.0)) is not None:
             self.driver.handle(frame)
+        self.policy.on_drive_silence(self.driver.silent, self.driver.frozen_so_far())   # the driver's diagnostics
 
     def _on_event(self, event, run: GraphRun) -> None:
         self.policy.on_sensing(self.host_time)

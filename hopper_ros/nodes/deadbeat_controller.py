@@ -56,7 +56,7 @@ from hopper_ros.runtime.periodic import PeriodicThread
 from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
 from hopper_ros.nodes.common import log_event, read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import (DIAGNOSTICS_TOPIC, ERROR, OK, WARN, DiagnosticsReporter, level_of,
-                                          split_node_name)
+                                          split_node_name, status_values)
 from hopper_ros.nodes.stamps import now_seconds, to_seconds, to_stamp
 
 SETPOINT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -152,17 +152,24 @@ class DeadbeatControllerNode(Node):
             self._send()
 
     def _on_diagnostics(self, msg) -> None:
-        """The motor driver reports a drive fault or a lost drive at once: hold the leg, no torque.
+        """The motor driver reports a drive fault or a lost drive at once: hold the leg, no torque;
+        and a drive that stands still (`drive_silent`, `drive_frozen_s`: the robot's time, for the
+        stance ramp's grace).
 
         Every node of every namespace reports on /diagnostics: only a motor driver of our own
         namespace counts (its node name ends in "motor_driver")."""
         for status in msg.status:
             namespace, name = split_node_name(status.name)
-            if namespace == self.get_namespace() and name.endswith("motor_driver") and level_of(status) == ERROR:
-                with self._lock:
-                    if self.policy.on_drive_fault(status.message):
-                        self._send()
-                return
+            if namespace != self.get_namespace() or not name.endswith("motor_driver"):
+                continue
+            values = status_values(status)
+            frozen = values.get("drive_frozen_s")
+            with self._lock:
+                if isinstance(frozen, float):
+                    self.policy.on_drive_silence(values.get("drive_silent") == 1, frozen)
+                if level_of(status) == ERROR and self.policy.on_drive_fault(status.message):
+                    self._send()
+            return
 
     # ------------------------------------------------------------------ the repeats
     def spinning(self) -> None:

@@ -100,6 +100,7 @@ class MotorDriverNode(Node):
         self._status_msg.header.frame_id = "hip"
         self._diagnostics = DiagnosticsReporter(self, f"EPOS2 node {self._driver.node_id} on CAN {transport.interface}")
         self.create_subscription(MotorCommand, "motor_command", self._on_command, COMMAND_QOS)
+        self._silent_reported = False
         self._loop = CycleLoop(self._driver, self._lock, self._log, self._publish_status, self.get_logger().error,
                                status_decimation, config.status_period)
         self.create_timer(config.diagnostics_period, self._publish_diagnostics)
@@ -149,11 +150,12 @@ class MotorDriverNode(Node):
             status = self._driver.status
             gaps = self._driver.command_gaps
             values = [self._driver.settings.command_timeout, status.current, status.position, gaps.quantile(0.99),
-                      gaps.max, gaps.take_recent()]
+                      gaps.max, gaps.take_recent(), self._driver.frozen_so_far()]
+            silent = int(self._driver.silent)
         self._diagnostics.report(
-            {**dict(zip(COUNTER_NAMES, counters)), "cycle_overruns": self._loop.overruns},
+            {**dict(zip(COUNTER_NAMES, counters)), "cycle_overruns": self._loop.overruns, "drive_silent": silent},
             dict(zip(["command_timeout_s", "current_a", "position_rad", "command_gap_p99_s", "command_gap_max_s",
-                      "command_gap_period_max_s", "cycle_rate_hz"], [*values, self._loop.rate])),
+                      "command_gap_period_max_s", "drive_frozen_s", "cycle_rate_hz"], [*values, self._loop.rate])),
             message, {INFO: diagnostics.OK, WARN: diagnostics.WARN, ERROR: diagnostics.ERROR}[level])
 
     def _log(self, events) -> None:
@@ -167,7 +169,9 @@ class MotorDriverNode(Node):
             else:
                 logger.info(text)
             problem = problem or level != INFO
-        if problem:
+        silent = self._driver.silent
+        if problem or silent != self._silent_reported:     # the controller defers a ramp's cancel while silent
+            self._silent_reported = silent
             self._publish_diagnostics()
 
     def destroy_node(self):

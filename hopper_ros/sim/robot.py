@@ -137,22 +137,27 @@ class SimRobot:
         offset, saturation, and the lag) makes the torque that reaches the leg of it."""
         return self.motor.torque(current)
 
-    def step(self) -> SimSample:
-        """One sample period: the drive's loop periods within it, then the packet of its end."""
+    def step(self, catching_up: bool = False) -> SimSample:
+        """One sample period: the drive's loop periods within it, then the packet of its end.
+
+        `catching_up`: the period runs late, behind a stall of the process (sim/runner.py): the drive
+        takes the frames of one SYNC period only, as it would have on time."""
         events: list[PlantEvent] = []
-        for _ in range(self._substeps):
-            events += self._advance(self.period / self._substeps)
+        for substep in range(self._substeps):
+            poll = "one_sync" if catching_up and substep == 0 else "none" if catching_up else "all"
+            events += self._advance(self.period / self._substeps, poll)
         if self.experiment is not None:
             self.experiment.on_events(events)
         return self._sample(events)
 
-    def _advance(self, dt: float) -> list[PlantEvent]:
+    def _advance(self, dt: float, poll: str = "all") -> list[PlantEvent]:
         plant = self.plant
         t0 = plant.t
         demand, commanded = 0.0, True
         if self.drive is not None:
             counts = self.kinematics.motor.count(plant.leg_angle)
-            self.drive.poll(t0)
+            if poll != "none":
+                self.drive.poll(t0, one_sync=poll == "one_sync")
             demand = self.drive.control(t0, counts, self.motor.motor_speed_rpm(plant.leg_rate), self._current(t0))
             commanded = self.drive.operation_mode == OperationMode.CURRENT
         elif self.experiment is not None:

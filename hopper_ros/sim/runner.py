@@ -1,7 +1,7 @@
 """The simulated robot run as the robot runs: its own thread steps the physics once per period
 (on the wall clock in `realtime` mode, as fast as it goes in `lockstep`; a stall of the process of more
-than RESYNC_PERIODS periods freezes the simulated world for its length, as the driver expects of a
-drive that answers no SYNC), sends the
+than RESYNC_AFTER freezes the simulated world for its length, its drive answering none of the SYNCs
+that came meanwhile, as the driver expects; a shorter one is caught up), sends the
 microcontroller's UDP packet to the encoder bridge on loopback and hands every period's sample to
 the caller (the sim_robot node publishes its force plate, truth and events). The emulated EPOS2
 sits on the CAN transport the `can` setting names, the motor driver's own selection
@@ -23,10 +23,13 @@ from .experiment import ExperimentSeries
 from .robot import SimRobot, SimSample
 
 MODES = ("realtime", "lockstep")
-RESYNC_PERIODS = 2         # further behind than this many periods, real-time mode does not catch up: the time
-                           #   missed is skipped, the robot's world was frozen (issue 29: caught up, the backlog
-                           #   ran with the drive's last command: a stalled stance lost its ramp's torque; a robot
-                           #   behind the wall clock takes the driver's host-timed ramp early: 2 mm of apex per ms)
+RESYNC_AFTER = 0.02        # [s] further behind than this, real-time mode does not catch up: the time missed is
+                           #   skipped, the robot's world was frozen, and the drive answers none of the SYNCs
+                           #   that came meanwhile (the motor driver counts them as the time the robot stood
+                           #   still and holds its stance ramp by it). Less far behind, the periods run late, one
+                           #   SYNC period of the drive's frames each: the robot feels the driver's ramp as sent
+                           #   (issue 29: a stall of 2 periods froze the world, and the driver could not tell a
+                           #   frozen robot from answers late by as much, which held ramps of a robot that ran on)
 
 
 def open_drive(can_setting: str, hardware: HardwareConfig, port: int | None):
@@ -117,7 +120,17 @@ class SimRunner:
             if throw is not None:
                 self.robot.throw(*throw, lead_time=self.throw_lead)
                 self.counters["throws"] += 1
-            sample = self.robot.step()
+            catching_up = False
+            if realtime:
+                late = time.monotonic() - deadline
+                if late > RESYNC_AFTER:                    # the time missed is skipped: the robot was frozen
+                    deadline = time.monotonic()
+                    self.counters["resyncs"] += 1
+                    if self.drive is not None:
+                        self.drive.discard_syncs(late)
+                    late = 0.0
+                catching_up = late > period
+            sample = self.robot.step(catching_up)
             self.robot.plant.events.clear()      # the sample holds them: the plant's history grew without end
             self.counters["periods"] += 1        #   (0.4 kB an event, 40k an hour: the soak's memory growth)
             try:
@@ -132,6 +145,3 @@ class SimRunner:
                     time.sleep(wait)
                 else:
                     self.counters["deadline_misses"] += 1
-                    if wait < -RESYNC_PERIODS * period:     # the time missed is skipped: the robot was frozen
-                        deadline = time.monotonic()
-                        self.counters["resyncs"] += 1

@@ -13,3 +13,4 @@ class Counters:
     rpdos_applied: int = 0
     tpdos_sent: int = 0
     syncs: int = 0
+    syncs_missed: int = 0          # SYNCs that came while the device stood still (never seen: not answered)

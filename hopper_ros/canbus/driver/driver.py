@@ -47,16 +47,14 @@ from .sequence import StartupAndShutdown
 from .settings import (COUNTER_NAMES, ERROR, INFO, MODE_CURRENT, MODE_DISABLED, MODE_NAMES, MODE_POSITION, MODE_RAMP,
                        WARN, DriveConfig, DriverSettings)
 from .startup import RPDO_MAPPINGS, TPDO_MAPPINGS
+from .stillness import DriveStillness
 from .status import DriveStatus, Phase, connection_closed, first_line
 from .units import DriveUnits
 
-__all__ = ["MotorDriver", "DriveStatus", "Phase", "connection_closed", "first_line", "RAMP_RESTAMP", "SILENT_SYNCS"]
+__all__ = ["MotorDriver", "DriveStatus", "Phase", "connection_closed", "first_line", "RAMP_RESTAMP"]
 
 RAMP_RESTAMP = 0.0005   # [s] a MODE_RAMP stamp moved by more than this re-anchors the running ramp (repeats of
                         #   one stamp differ by the command's transit jitter only)
-SILENT_SYNCS = 3        # this many SYNCs in a row the drive left unanswered: it is not running (the simulated
-                        #   robot's process stalled: sim/runner.py RESYNC_PERIODS): a running ramp is held until it
-                        #   answers again
 
 
 class MotorDriver(ReceivedFrames, StartupAndShutdown):
@@ -112,14 +110,15 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         self._last_cw: int | None = None                                  # fault found at start-up is reset
         # cyclic exchange
         self._sent_since_sync: tuple[int, bytes] | None = None
-        # MODE_RAMP: (tau_0, duration, start, stamp, held): start = the stamp (or later) + the time it was held
-        self._ramp: tuple[float, float, float, float, float] | None = None
+        # MODE_RAMP: (tau_0, duration, start, stamp): start = the stamp (or later) + the time the robot stood still
+        self._ramp: tuple[float, float, float, float] | None = None
         self._last_rpdo: tuple[int, bytes] | None = None   # the last RPDO sent and when
         self._last_rpdo_time = -math.inf
         self._tpdo_seen = 0                 # TPDOs received since the last SYNC (bit n-1: TPDO n)
         self._sync_outstanding = False
-        self._silent_syncs = 0              # SYNCs in a row the drive has not answered
-        self._last_cycle = now
+        self.stillness = DriveStillness(settings.sync_period, now)   # when the robot stood still
+        self._held = 0.0                    # [s] what the ramp moved by for the latest stand-still so far
+        self._follows = False               # the ramp moves with the latest stand-still (it came after its stamp)
         self._last_answer = now             # when the drive last answered a SYNC (its TPDOs complete)
         self._next_master_heartbeat = now
         self._nmt_start_sent_at = -math.inf
@@ -167,12 +166,15 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                 if self._ramp is None or self._ramp[:2] != (setpoint, duration):
                     # anchored at its stamp (the touchdown, or one predicted ahead: zero current until
                     # then), unless the command came late: a ramp skipped is energy lost
-                    self._ramp = (setpoint, duration, max(stamp, now - self.settings.max_ramp_age), stamp, 0.0)
+                    start = max(stamp + self.frozen_after(stamp, now), now - self.settings.max_ramp_age)
+                    self._ramp = (setpoint, duration, start, stamp)
+                    self._held = self.stillness.pending(now, stamp)
+                    self._follows = self.stillness.covers(stamp)
                 elif abs(stamp - self._ramp[3]) > RAMP_RESTAMP:
-                    # the same ramp under a new stamp (the measured touchdown after a predicted one):
-                    # the running ramp moves to it, still held as long as it was (_hold_ramp)
-                    held = self._ramp[4]
-                    self._ramp = (setpoint, duration, stamp + held, stamp, held)
+                    # the same ramp under a new stamp (the measured touchdown after a predicted one)
+                    self._ramp = (setpoint, duration, stamp + self.frozen_after(stamp, now), stamp)
+                    self._held = self.stillness.pending(now, stamp)
+                    self._follows = self.stillness.covers(stamp)
                 self._current_ma = self._current_setting(self._ramp_torque(now))
             else:
                 self._position_qc = self._position_setting(setpoint)
@@ -208,16 +210,13 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         self._trip_watchdog(now)
         if self._sync_outstanding and self._tpdo_seen != (1 << len(TPDO_MAPPINGS)) - 1:
             self.counters["tpdo_missed"] += 1
-            self._silent_syncs += 1
-        else:
-            self._silent_syncs = 0
-        self._hold_ramp(now)
-        self._last_cycle = now
+        self._follow_stillness(now)
         self._send_rpdo(now, force=False)
         self._sent_since_sync = None
         self._tpdo_seen = 0
         if self._send(sync_frame()):
             self.counters["sync_sent"] += 1
+            self.stillness.sent += 1
             self._sync_outstanding = True
 
     def watchdog_deadline(self) -> float:
@@ -350,18 +349,53 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                                "command disable to try again", key="reset_failed")
         return word
 
-    def _hold_ramp(self, now: float) -> None:
-        """A running ramp is the robot's: while the drive answers no SYNC (SILENT_SYNCS in a row: it,
-        or the simulated robot's process, is not running) the robot does not move on either, so the
-        ramp waits (its start moves with the clock) instead of running out in a stance that is frozen."""
-        if self._silent_syncs >= SILENT_SYNCS and self._ramp is not None and now > self._ramp[2]:
-            tau_0, duration, start, stamp, held = self._ramp
-            # the first silent period found: the robot stopped after the drive's last answer, so the
-            # ramp is held from then (the SILENT_SYNCS periods it took to tell are not lost torque)
-            since = max(self._last_answer, start) if self._silent_syncs == SILENT_SYNCS else self._last_cycle
-            pause = now - since
-            self._ramp = (tau_0, duration, start + pause, stamp, held + pause)
-            self.counters["ramp_held_syncs"] += 1
+    @property
+    def silent(self) -> bool:
+        """The drive answers no SYNC (drive_stillness.SILENT_PERIODS): the robot may be standing still."""
+        return self.stillness.silent
+
+    @property
+    def frozen_time(self) -> float:
+        """[s] The time the robot stood still so far (SYNCs its drive never answered)."""
+        return self.stillness.frozen_time
+
+    def frozen_so_far(self, now: float | None = None) -> float:
+        """[s] `frozen_time` and the latest stand-still not yet settled (what the controller's grace
+        for a touchdown moves by)."""
+        return self.stillness.frozen_time + self.stillness.pending(self.clock() if now is None else now)
+
+    def frozen_after(self, stamp: float, now: float) -> float:
+        """[s] How long the robot stood still after the instant `stamp` (`DriveStillness.frozen_after`)."""
+        return self.stillness.frozen_after(stamp, now)
+
+    def _follow_stillness(self, now: float) -> None:
+        """The ramp is the robot's: while it stands still the ramp waits (its start moves with the
+        clock) instead of running out in a stance that is frozen, and one scheduled ahead of a
+        predicted touchdown moves with the robot's flight. When the answers are back, the SYNCs left
+        unanswered say how long it stood still and the ramp follows that, whatever it was held (a robot
+        whose answers were only late ran on: its ramp goes back to the host clock)."""
+        silence = self.stillness.standing_still(now)
+        settled = self.stillness.update(now)
+        if self._ramp is None:
+            self._follows, self._held = False, 0.0
+        elif self.stillness.silent:
+            self._follows = True                    # a ramp of this silence moves with it
+        if settled is not None:
+            target = settled if self._follows else 0.0
+        else:
+            target = max(silence, self._held) if self._follows else self._held
+        move = target - self._held
+        if self._ramp is not None and move:
+            tau_0, duration, start, stamp = self._ramp
+            self._ramp = (tau_0, duration, start + move, stamp)
+            self.counters["ramp_held_syncs"] += move > 0.0
+        self._held = 0.0 if settled is not None else target
+        if settled is not None:
+            self._follows = False
+        if settled:
+            self._event(WARN, f"the drive stood still for {settled * 1e3:.0f} ms ({settled / self.settings.sync_period:.0f} "
+                              "SYNCs never answered: the simulated robot's process stopped?): the stance ramp "
+                              "moved by that")
 
     def _ramp_torque(self, now: float) -> float:
         tau_0, duration, start = self._ramp[:3]

@@ -62,6 +62,8 @@ class ReceivedFrames:
 
     def _tpdo_received(self, number: int, now: float) -> bool:
         self.counters["tpdo_received"] += 1
+        if number == 1:
+            self.stillness.on_answer(now)        # every SYNC is answered by each TPDO (transmission type 1)
         self._tpdo_seen |= 1 << (number - 1)
         if self._sync_outstanding and self._tpdo_seen == (1 << len(TPDO_MAPPINGS)) - 1:
             self._sync_outstanding = False

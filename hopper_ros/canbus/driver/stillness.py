@@ -1,0 +1,112 @@
+"""When the drive, and the robot with it, stood still: told from its answers to SYNC (no ROS).
+
+A drive answers every SYNC with its TPDOs (transmission type 1). The simulated robot's drive stops
+answering when its process stops (sim/runner.py); past RESYNC_AFTER (20 ms) its world stands still
+for the stall and it answers none of the SYNCs of that time, while a shorter stall is caught up and
+every SYNC answered late. Answers merely late (a loaded host, the hub's transit) look the same until
+they come. So:
+
+- `silent`: no answer for SILENT_PERIODS SYNC periods; the robot may be standing still;
+- `standing_still(now)` [s]: the present silence once it is longer than FROZEN_AFTER, which no caught-up
+  stall and no transit delay reaches: the robot stands still, from its last answer on;
+- when the answers are back and have settled (SETTLE), the SYNCs left unanswered for good are the time
+  the robot stood still (`update` returns it; fewer than FROZEN_MIN's worth are answers still in
+  transit); `frozen_time` adds them up and `frozen_after(stamp)` maps an instant of the robot's onto
+  the host clock.
+"""
+
+from __future__ import annotations
+
+import math
+
+SILENT_PERIODS = 3      # no answer for this many SYNC periods: silent (the robot may stand still)
+FROZEN_AFTER = 0.025    # [s] silent this long: the robot stands still (past sim/runner.py RESYNC_AFTER, 20 ms,
+                        #   plus the frames' transit)
+FROZEN_MIN = 0.01       # [s] fewer SYNCs than this left unanswered are answers still in transit
+SETTLE = 0.005          # [s] after a silence, the late answers still coming in this long
+SILENCES_KEPT = 8       # the last times the robot stood still, kept for `frozen_after`
+
+
+class DriveStillness:
+    def __init__(self, sync_period: float, now: float) -> None:
+        self.sync_period = sync_period
+        self.frozen_time = 0.0                    # [s] the robot stood still so far
+        self.sent = self.answered = 0             # SYNCs sent, SYNCs answered (their first TPDO)
+        self._last_answer = now
+        self._silence_began: float | None = None  # the last answer before the present silence
+        self._settling_until = -math.inf          # a silence ended: its late answers still coming
+        self._least_unanswered: int | None = None  # while settling
+        self._floor: int | None = None            # SYNCs known never to be answered (start-up, standing still)
+        self._silences: list[tuple[float, float]] = []   # (when it ended, how long it stood still)
+        self._ended = now                         # the first answer after the last silence
+
+    @property
+    def silent(self) -> bool:
+        return self._silence_began is not None
+
+    def on_answer(self, now: float) -> None:
+        self.answered += 1
+        self._last_answer = now
+
+    def standing_still(self, now: float) -> float:
+        """[s] The present silence, once it is long enough to be the robot standing still."""
+        if self._silence_began is not None and now - self._silence_began > FROZEN_AFTER:
+            return now - self._silence_began
+        return 0.0
+
+    def pending(self, now: float, stamp: float = -math.inf) -> float:
+        """[s] The latest stand-still not yet settled, if it ended after `stamp`: the present silence's
+        (`standing_still`), or that of a silence whose answers are still coming in (as far as they
+        tell so far)."""
+        if self._least_unanswered is not None and stamp < self._ended:
+            frozen = max(0, self._least_unanswered - self._floor) * self.sync_period
+            return frozen if frozen >= FROZEN_MIN else 0.0
+        return self.standing_still(now)
+
+    def covers(self, stamp: float) -> bool:
+        """Whether the latest stand-still, not yet settled, came after the instant `stamp` (so that a
+        ramp from that stamp moves by it)."""
+        return self.silent or (self._least_unanswered is not None and stamp < self._ended)
+
+    def frozen_after(self, stamp: float, now: float) -> float:
+        """[s] How long the robot stood still after the instant `stamp` (times that ended after it, and
+        the latest one), which its host time must move by. A time is counted whole even when the
+        stamp falls inside it: no instant of the robot's lies there, so such a stamp was mapped from
+        the robot's clock as it stood before (the sensing clock re-anchors only after it) and lies
+        that whole time early."""
+        return sum(frozen for ended, frozen in self._silences if ended > stamp) + self.pending(now, stamp)
+
+    def update(self, now: float) -> float | None:
+        """Once a SYNC period, before its SYNC: the time [s] the robot stood still in a silence whose
+        answers have just settled (0.0 when it ran on), else None."""
+        unanswered = self.sent - self.answered
+        if self._floor is None:
+            self._floor = unanswered
+        quiet = now - self._last_answer > SILENT_PERIODS * self.sync_period
+        if quiet and self._silence_began is None:
+            result = self._settle() if self._least_unanswered is not None else None
+            self._silence_began = self._last_answer
+            return result
+        if quiet:
+            return None
+        if self._silence_began is not None:           # answers again: their backlog may still be coming
+            self._silence_began, self._settling_until = None, now + SETTLE
+            self._least_unanswered = unanswered
+            self._ended = self._last_answer
+            return None
+        if self._least_unanswered is None:
+            self._floor = min(self._floor, unanswered)
+            return None
+        self._least_unanswered = min(self._least_unanswered, unanswered)
+        return self._settle() if now >= self._settling_until else None
+
+    def _settle(self) -> float:
+        excess = max(0, self._least_unanswered - self._floor)
+        self._least_unanswered = None
+        frozen = excess * self.sync_period
+        if frozen < FROZEN_MIN:
+            return 0.0
+        self._floor += excess
+        self.frozen_time += frozen
+        self._silences = [*self._silences[1 - SILENCES_KEPT:], (self._ended, frozen)]
+        return frozen

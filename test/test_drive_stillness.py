@@ -1,0 +1,120 @@
+"""Issue 29: when the robot stood still, told from its drive's answers to SYNC (canbus/driver/stillness.py),
+and the emulated drive's side of it (a stall caught up one SYNC period a step, a frozen one unanswered)."""
+
+from __future__ import annotations
+
+import can
+import pytest
+
+from hopper_ros.canbus.driver.stillness import FROZEN_AFTER, DriveStillness
+from hopper_ros.canbus.epos2_emulator import Epos2Emulator
+from hopper_ros.canbus.cia301.master import sync_frame
+from hopper_ros.hardware.config import load_hardware
+
+PERIOD = 0.001
+
+
+def run(stillness, cycles, start, answer=lambda k: True, deliver=lambda k, now: now):
+    """`cycles` SYNC periods from `start`: SYNC k is sent at its period; answered (`answer(k)`), its answer
+    arrives at `deliver(k, sent)`. Returns what `update` said, per cycle."""
+    pending, said = [], []
+    for k in range(cycles):
+        now = start + k * PERIOD
+        for when in [w for w in pending if w <= now]:
+            stillness.on_answer(when)
+            pending.remove(when)
+        said.append(stillness.update(now))
+        stillness.sent += 1
+        if answer(k):
+            pending.append(deliver(k, now))
+    for when in sorted(w for w in pending if w <= start + cycles * PERIOD):   # in before the next period
+        stillness.on_answer(when)
+    return said
+
+
+def test_answers_on_time_are_no_silence():
+    stillness = DriveStillness(PERIOD, 0.0)
+    said = run(stillness, 200, 0.0, deliver=lambda k, now: now + 0.0004)
+    assert not stillness.silent and stillness.frozen_time == 0.0 and all(s is None for s in said)
+
+
+def test_answers_late_by_a_stall_that_was_caught_up_are_not_standing_still():
+    """The drive answers every SYNC, but those of 15 ms come late in a burst (a loaded host, or the robot
+    catching up): silent meanwhile, nothing frozen once they are in."""
+    stillness = DriveStillness(PERIOD, 0.0)
+    run(stillness, 100, 0.0, deliver=lambda k, now: now + 0.0004)
+    said = run(stillness, 100, 0.1, deliver=lambda k, now: max(now + 0.0004, 0.1152) if k < 15 else now + 0.0004)
+    assert [s for s in said if s is not None] == [0.0]
+    assert stillness.frozen_time == 0.0 and not stillness.silent
+
+
+def test_syncs_never_answered_are_the_time_the_robot_stood_still():
+    stillness = DriveStillness(PERIOD, 0.0)
+    run(stillness, 100, 0.0, deliver=lambda k, now: now + 0.0004)
+
+    def answer(k):
+        return not 10 <= k < 90           # 80 SYNCs the robot never saw
+
+    def deliver(k, now):
+        return max(now + 0.0004, 0.1 + 0.0905) if k >= 90 else now + 0.0004
+
+    said = run(stillness, 200, 0.1, answer=answer, deliver=deliver)
+    assert [s for s in said if s is not None] == [pytest.approx(0.08)]
+    assert stillness.frozen_time == pytest.approx(0.08)
+    # an instant before the stand-still, or one inside it (stamped on the robot's clock as it stood
+    # before), moves by all of it; one after it by nothing
+    assert stillness.frozen_after(0.105, 0.3) == pytest.approx(0.08)
+    assert stillness.frozen_after(0.15, 0.3) == pytest.approx(0.08)
+    assert stillness.frozen_after(0.25, 0.3) == 0.0
+
+
+def test_a_long_silence_is_the_robot_standing_still_while_it_lasts():
+    stillness = DriveStillness(PERIOD, 0.0)
+    run(stillness, 50, 0.0, deliver=lambda k, now: now + 0.0004)
+    run(stillness, 60, 0.05, answer=lambda k: False)
+    now = 0.05 + 59 * PERIOD
+    assert stillness.silent
+    assert stillness.standing_still(now) == pytest.approx(now - (0.049 + 0.0004))   # the last answer it saw
+    assert stillness.standing_still(now) > FROZEN_AFTER
+
+
+def emulator_pair():
+    channel = f"stillness_{id(object())}"
+    drive_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    master = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    drive = Epos2Emulator(drive_bus, load_hardware())
+    master.send(can.Message(arbitration_id=0x000, data=bytes([0x01, drive.node_id]), is_extended_id=False))
+    drive.poll(0.0)                                   # NMT start: operational, SYNCs answered
+    while master.recv(timeout=0.0) is not None:
+        pass
+    return drive, master, drive_bus
+
+
+def answers(master):
+    count = 0
+    while (frame := master.recv(timeout=0.0)) is not None:
+        count += frame.arbitration_id == 0x180 + 1
+    return count
+
+
+def test_the_emulated_drive_catches_up_one_sync_period_a_step_and_answers_none_of_a_freeze():
+    drive, master, drive_bus = emulator_pair()
+    try:
+        for _ in range(5):
+            master.send(sync_frame())
+        drive.poll(0.001, one_sync=True)
+        assert answers(master) == 1                       # one SYNC period of the backlog a step
+        drive.poll(0.002)
+        assert answers(master) == 4
+        for k in range(20):                               # a regular SYNC period seen
+            master.send(sync_frame())
+            drive.poll(0.003 + k * 0.001)
+        assert answers(master) == 20
+        drive.discard_syncs(0.010)                        # the robot stood still 10 ms: those SYNCs never seen
+        for _ in range(12):
+            master.send(sync_frame())
+        drive.poll(0.03)
+        assert answers(master) == 2 and drive.counters.syncs_missed == 10
+    finally:
+        master.shutdown()
+        drive_bus.shutdown()
