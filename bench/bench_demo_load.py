@@ -13,7 +13,8 @@ health.json (the nodes' diagnostics from the throw on, hopper_ros/cli/demo.py): 
 than 1 ms after their sample, the stance ramps the controller cancelled, the stances in which the
 leg felt no ramp torque or felt it more than 5 ms after the touchdown (hopper_ros/sim/stance.py),
 the motor command stream's gaps at the driver (p99 over the run, the longest), its watchdog
-stops. The runs' folders (launch.log of every node, strides, health) stay in
+stops, the simulated robot's freezes (stalls past sim/runner.py RESYNC_AFTER) with the SYNCs its
+drive never answered and the time the driver counted the robot standing still from them. The runs' folders (launch.log of every node, strides, health) stay in
 bench/out/demo_load/; runs.jsonl has one line per run.
 """
 import csv
@@ -122,6 +123,10 @@ def figures(runs: list[dict], suffix: str) -> list[dict]:
         {"name": f"demo_command_gap_max_ms_under_load{suffix}", "value": worst("command_gap_max_ms"), "unit": "ms"},
         {"name": f"demo_watchdog_stops_under_load{suffix}", "value": total("watchdog_stops"), "unit": "stops"},
         {"name": f"demo_sim_freezes_under_load{suffix}", "value": total("sim_resyncs"), "unit": "freezes"},
+        {"name": f"demo_sim_syncs_missed_under_load{suffix}", "value": total("sim_syncs_missed"),
+         "unit": "SYNCs the frozen robot's drive never answered"},
+        {"name": f"demo_drive_frozen_ms_under_load{suffix}", "value": total("drive_frozen_ms"),
+         "unit": "ms the driver counted the robot standing still"},
     ]
 
 

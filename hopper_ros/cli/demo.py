@@ -261,6 +261,8 @@ def loop_health(health: dict, at_throw: dict | None = None, gap_max: dict | None
         "command_timeout_ms": 1e3 * value("motor_driver", "command_timeout_s"),
         "watchdog_stops": value("motor_driver", "watchdog_stops"),
         "ramp_held_syncs": value("motor_driver", "ramp_held_syncs"),
+        "drive_frozen_ms": 1e3 * value("motor_driver", "drive_frozen_s"),          # the robot stood still, as the
+        "sim_syncs_missed": value("sim_robot", "drive_syncs_missed"),             #   driver counted it; as it was
     }
 
 
