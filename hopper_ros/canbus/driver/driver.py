@@ -351,7 +351,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
 
     @property
     def silent(self) -> bool:
-        """The drive answers no SYNC (drive_stillness.SILENT_PERIODS): the robot may be standing still."""
+        """The drive answers no SYNC (stillness.SILENT_PERIODS): the robot may be standing still."""
         return self.stillness.silent
 
     @property
