@@ -102,7 +102,7 @@ class StridePolicy:
         self._drive_silent = False      # the motor driver says the drive (the robot) stands still
         self._frozen_time = 0.0         # [s] the time it stood still so far (the driver's count)
         self._frozen_at_prediction = 0.0
-        self._acknowledge = -math.inf   # a drive fault before the first stride: MODE_DISABLED until then
+        self._acknowledge = -math.inf   # a drive fault: MODE_DISABLED until then (FAULT_ACKNOWLEDGE)
         self.sensing_lost = False
 
     @property
@@ -186,20 +186,25 @@ class StridePolicy:
 
     def on_drive_fault(self, message: str) -> bool:
         """The motor driver reports a drive fault or a lost drive: hold the leg, no torque. False
-        when the stride is in the safe state already. Before the first apex (no stride yet: the robot
-        held, waiting for its throw) it is reported and nothing latches: the driver keeps a faulted
-        drive off itself, and a start-up that failed once (the simulated robot's hub not up yet) left
-        the controller safe, its drive disabled, and the demo waiting for an enabled drive forever."""
+        when the stride is in the safe state already. Either way the stream acknowledges it
+        (MODE_DISABLED for FAULT_ACKNOWLEDGE, the driver's cue to reset a fault): a fault while
+        hopping was never acknowledged (only a sensing chain silent for `sensing_timeout` disabled
+        the drive), so a drive that faulted once (its heartbeat consumer, the driver starved 15 ms
+        under load) stayed faulted, and the robot fell after every throw (63 times in a soak).
+        Before the first apex (no stride yet: the robot held, waiting for its throw) nothing
+        latches: a start-up that failed once (the simulated robot's hub not up yet) left the
+        controller safe, its drive disabled, and the demo waiting for an enabled drive forever."""
         if self.machine.phase is Phase.SAFE:
             return False
         self.counters["faults"] += 1
+        self._acknowledge = math.inf            # MODE_DISABLED for FAULT_ACKNOWLEDGE from the next command on
         if self.machine.phase in (Phase.IDLE, Phase.INITIALISE):
             self.events.append(("error", f"motor driver: {message} (no stride yet: acknowledged, the leg is held "
                                          "once the drive is back)"))
-            self._acknowledge = math.inf        # MODE_DISABLED for FAULT_ACKNOWLEDGE, the driver's cue to reset a fault
             return True
         self.machine.fault(f"motor driver: {message}")
-        self.events.append(("error", self.machine.reason))
+        self.events.append(("error", self.machine.reason + " (acknowledged: the stride after the next apex "
+                                                           "goes on once the drive is back)"))
         return True
 
     # ------------------------------------------------------------------ output

@@ -26,6 +26,7 @@ from typing import Callable, Iterable
 import can
 
 from hopper_ros.canbus.driver import DriverSettings, MotorDriver
+from hopper_ros.canbus.driver.settings import ERROR
 from hopper_ros.canbus.epos2_emulator import Epos2Emulator
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.hardware.config import HardwareConfig
@@ -125,6 +126,9 @@ class GraphLockstep:
         while (frame := self._master_bus.recv(timeout=0.0)) is not None:
             self.driver.handle(frame)
         self.policy.on_drive_silence(self.driver.silent, self.driver.frozen_so_far())   # the driver's diagnostics
+        level, message = self.driver.health()
+        if level == ERROR:
+            self.policy.on_drive_fault(message)
 
     def _on_event(self, event, run: GraphRun) -> None:
         self.policy.on_sensing(self.host_time)
