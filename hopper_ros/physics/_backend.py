@@ -55,7 +55,7 @@ def select(*values):
     None is ignored (optional arguments).
     """
     for value in values:
-        if value is None or type(value) is float or type(value) is int:
+        if type(value) is float or value is None or type(value) is int:
             continue
         if isinstance(value, np.ndarray) or not isinstance(value, Real) or isinstance(value, bool):
             return ARRAY
