@@ -130,11 +130,13 @@ def _predict(params: ModelParams, apex_height, forward_speed, touchdown_angle, t
     x, transposed, complex_transposed = _quadrature(nodes)
     span = xp.where(xp.isfinite(stance_time), stance_time, 0.0)                      # T
     span_c = column(span)
-    # int_0^{t_j} f times m g (the gravity impulse), 1/m (the angle from m theta') and 1 (Duhamel's integral)
+    # int_0^{t_j} f times m g (the gravity impulse), 1/m (the angle from m theta') and 1 (Duhamel's integral);
+    # np.dot rather than @: the same products, ~0.25 us less a call on the (N,) arrays of one stride
+    dot = np.dot
     if xp is SCALAR:    # T and the factors folded into the quadrature matrices
         by_mg, by_inverse_m, by_one = (m * g * span) * transposed, (span / m) * transposed, span * complex_transposed
-        integrate_mg, integrate_over_m, integrate = (lambda f: f @ by_mg), (lambda f: f @ by_inverse_m), (
-            lambda f: f @ by_one)
+        integrate_mg, integrate_over_m, integrate = (lambda f: dot(f, by_mg)), (lambda f: dot(f, by_inverse_m)), (
+            lambda f: dot(f, by_one))
     else:
         integrate_mg = lambda f: (m * g) * span_c * (f @ transposed)
         integrate_over_m = lambda f: span_c / m * (f @ transposed)

@@ -66,10 +66,11 @@ def descent_time_xp(xp, drop, gravity, damping_v, iterations: int = 2):
     if damping_v < NEGLIGIBLE_DAMPING:
         return t
     t = t * (1.0 + damping_v * t / 6.0)   # first-order damping correction of the ballistic time
-    for _ in range(iterations):
+    while iterations > 0:
         decay = -xp.expm1(-damping_v * t) / damping_v          # (1 - e^{-d t}) / d
         fallen = gravity * (t - decay) / damping_v             # drop of (2.14) from rest
         t = t - (fallen - drop) / xp.maximum(gravity * decay, 1e-300)
+        iterations -= 1
     return t
 
 
