@@ -81,6 +81,8 @@ class DriveStillness:
         answers have just settled (0.0 when it ran on), else None."""
         unanswered = self.sent - self.answered
         if self._floor is None:
+            if not self.answered:               # not answering yet (starting): nothing to tell
+                return None
             self._floor = unanswered
         quiet = now - self._last_answer > SILENT_PERIODS * self.sync_period
         if quiet and self._silence_began is None:
