@@ -203,6 +203,12 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
             else:
                 traceback.print_exc()
     finally:
+        if status == 3:
+            # bad input before any node ran: nothing to clean up that matters, and tearing a half-built
+            # node down still crashed the interpreter now and then (exit -11 in CI, its error line printed)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(status)
         if stop.received is not None and node is not None:
             node.get_logger().info(f"stopping on {signal.Signals(stop.received).name}")
         if stop.received is None and any(getattr(each, "failed", False) for each in nodes):
