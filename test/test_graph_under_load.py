@@ -26,10 +26,24 @@ SETPOINT = (0.39, 2.0)
 STRIDES = 8
 
 
+def demo_graph(host_delay=lambda t: 0.0):
+    """The demo's loop (control.yaml, motor_driver.yaml) in one process."""
+    return GraphLockstep(load_sim_config(), HARDWARE, DeadbeatController(load_params(), CONTROL.deadbeat),
+                         driver_settings=DRIVER, stride_settings=CONTROL.stride, host_delay=host_delay)
+
+
+def release_after_throw(graph, run):
+    """SETPOINT's throw: the robot held at its apex while the drive comes up, then released."""
+    graph.set_setpoint(*SETPOINT)
+    graph.robot.throw(*SETPOINT, graph.controller.neutral_angle(SETPOINT[1]), lead_time=0.05, hold=True)
+    while graph.robot.t < 0.5:
+        graph.step(run)
+    graph.robot.plant.release()
+
+
 def run_graph(host_delay=lambda t: 0.0, graph_hook=None):
-    """The demo's loop (control.yaml, motor_driver.yaml) for STRIDES strides at SETPOINT."""
-    graph = GraphLockstep(load_sim_config(), HARDWARE, DeadbeatController(load_params(), CONTROL.deadbeat),
-                          driver_settings=DRIVER, stride_settings=CONTROL.stride, host_delay=host_delay)
+    """The demo's loop for STRIDES strides at SETPOINT."""
+    graph = demo_graph(host_delay)
     if graph_hook is not None:
         graph_hook(graph)
     try:
@@ -146,18 +160,13 @@ def test_sensing_that_stops_while_hopping_disables_the_drive():
     from hopper_ros.sensing.pipeline import PipelineOutput
 
     dead_from, dead_to = 1.6, 3.0
-    graph = GraphLockstep(load_sim_config(), HARDWARE, DeadbeatController(load_params(), CONTROL.deadbeat),
-                          driver_settings=DRIVER, stride_settings=CONTROL.stride)
+    graph = demo_graph()
     process = graph.sensing.process
     graph.sensing.process = lambda datagram, received: (PipelineOutput(None) if dead_from <= graph.robot.t < dead_to
                                                          else process(datagram, received))
     run, enabled = GraphRun(), []
     try:
-        graph.set_setpoint(*SETPOINT)
-        graph.robot.throw(*SETPOINT, graph.controller.neutral_angle(SETPOINT[1]), lead_time=0.05, hold=True)
-        while graph.robot.t < 0.5:
-            graph.step(run)
-        graph.robot.plant.release()
+        release_after_throw(graph, run)
         while graph.robot.t < dead_to + 0.3:
             graph.step(run)
             enabled.append((graph.robot.t, graph.robot.drive.state is State.OPERATION_ENABLED))
@@ -207,15 +216,10 @@ def test_a_drive_fault_while_hopping_is_acknowledged_and_the_robot_hops_on_after
     from hopper_ros.canbus.epos2_objects import State
     from hopper_ros.harness.graph_lockstep import GraphRun
 
-    graph = GraphLockstep(load_sim_config(), HARDWARE, DeadbeatController(load_params(), CONTROL.deadbeat),
-                          driver_settings=DRIVER, stride_settings=CONTROL.stride)
+    graph = demo_graph()
     run = GraphRun()
     try:
-        graph.set_setpoint(*SETPOINT)
-        graph.robot.throw(*SETPOINT, graph.controller.neutral_angle(SETPOINT[1]), lead_time=0.05, hold=True)
-        while graph.robot.t < 0.5:
-            graph.step(run)
-        graph.robot.plant.release()
+        release_after_throw(graph, run)
         while len(run.true_apexes) < 4:
             graph.step(run)
         graph.robot.drive.inject_fault(0x8130, graph.robot.t)
