@@ -120,6 +120,36 @@ def test_stride_machine_runs_fig_5_3():
     assert machine.command(1.3) == (MODE_POSITION, -0.3)
     machine.on_apex(None, "no touchdown angle")
     assert machine.phase is Phase.SAFE and machine.command(1.5) == (MODE_POSITION, -0.3)
+    machine.on_touchdown(2.0)                                   # an infeasible stride: no torque in its stance
+    assert machine.phase is Phase.SAFE and machine.command(2.01) == (MODE_CURRENT, 0.0)
+    machine.on_liftoff(-0.25)
+    assert machine.command(2.2) == (MODE_POSITION, -0.25)
+
+
+def test_a_drive_fault_keeps_the_stance_torque_free_and_the_stride_goes_on_when_the_drive_is_back():
+    """SAFE for a fault: no position hold through a stance (a large hip torque, which threw the robot
+    backwards); once the drive is back before lift-off the stride goes on: positioned again, or its
+    ramp from the touchdown."""
+    plan = StridePlan(tau_0=6.0, touchdown_angle=0.4, ramp_duration=0.1)
+    machine = StrideMachine()
+    machine.hold(0.35)
+    machine.on_apex(plan)
+    machine.fault("drive fault")
+    assert machine.phase is Phase.SAFE and machine.faulted
+    machine.revise(StridePlan(6.5, 0.41, 0.1))                  # stage 2 takes the plan, the fault stays
+    assert machine.phase is Phase.SAFE and machine.plan.touchdown_angle == 0.41
+    assert machine.resume() and machine.phase is Phase.POSITIONING and machine.command(0.1) == (MODE_POSITION, 0.41)
+    machine.fault("drive fault")
+    machine.on_pre_touchdown()
+    machine.on_touchdown(1.0)                                   # the touchdown during the fault: torque free
+    assert machine.command(1.001) == (MODE_CURRENT, 0.0)
+    assert machine.resume() and machine.phase is Phase.STANCE
+    assert machine.command(1.05) == (MODE_CURRENT, pytest.approx(-3.25))   # the ramp from the touchdown
+    machine.fault("drive fault")
+    machine.on_liftoff(-0.3)                                    # lifted off during the fault: SAFE to the apex
+    assert not machine.resume() and machine.phase is Phase.SAFE and machine.command(1.3) == (MODE_POSITION, -0.3)
+    machine.on_apex(plan)
+    assert machine.phase is Phase.POSITIONING and not machine.faulted
 
 
 def test_single_stride_experiment_runs_fig_4_1_and_brakes():

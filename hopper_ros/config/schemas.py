@@ -281,6 +281,7 @@ class Stride(Section):
     executor_timeout: float = unit("s", 0.02, gt=0)
     sensing_timeout: float = unit("s", 0.5, gt=0)
     keep_alive_priority_boost: int = Field(10, ge=0, le=49)
+    fault_acknowledge: float = unit("s", 0.02, gt=0, le=1.0)
 
 
 class CONTROL(Section):

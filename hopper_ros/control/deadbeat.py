@@ -327,6 +327,12 @@ class DeadbeatController:
                               stride_time, target_height, target_speed, height, speed, bias=bias)
 
     # ------------------------------------------------------------------ adaptation
+    def forget_stride(self) -> None:
+        """The stride last decided did not run as decided (a drive fault took its torque): its apex
+        says nothing of the model's error. (Learned, one such apex drove the bias to its bound and the
+        robot fell strides later.)"""
+        self._pending = None
+
     def observe(self, apex_height: float, forward_speed: float) -> None:
         """The apex that ends the stride last decided: learn the model's error (if adaptation is on)."""
         decision, self._pending = self._pending, None

@@ -7,6 +7,10 @@ Both share the phases of section 4.1:
   jump backs just before colliding with the ground"): zero current;
 - STANCE: from touchdown the ramp -tau_0 (1 - t/t_f) (2.32), zero after t_f (current mode);
 - ASCENT: after lift-off the leg is held at its lift-off angle (position mode).
+SAFE (an infeasible stride, a drive fault) puts no torque on the stance: the leg is held in flight
+only (a leg held in position through a stance is a large hip torque: it threw the robot backwards
+after a fault), and from lift-off at its lift-off angle. A fault's stride goes on (`resume`) when
+the drive is back before its lift-off.
 The closed loop goes back to POSITIONING at each apex with a new decision (Fig 5.3); the
 single-stride experiment holds theta_td while waiting for the throw (INITIALISE) and ends in
 BRAKE after the second apex (leg held, then the drive disabled).
@@ -59,6 +63,9 @@ class StrideMachine:
         self.touchdown_time = math.nan
         self.apexes = 0
         self.reason = ""
+        self.in_stance = False              # the gait events' word, whatever the phase (SAFE follows it)
+        self.faulted = False                # SAFE for a drive fault (until `resume` or the next apex)
+        self._faulted_in: Phase | None = None   # the flight phase a fault interrupted (resume goes back to it)
 
     # ------------------------------------------------------------------ inputs
     def hold(self, angle: float) -> None:
@@ -78,6 +85,7 @@ class StrideMachine:
     def on_apex(self, plan: StridePlan | None, reason: str = "") -> None:
         """An apex: the closed loop takes the new plan (None: infeasible -> SAFE, leg held)."""
         self.apexes += 1
+        self.in_stance, self.faulted, self._faulted_in = False, False, None
         if self.single_stride:
             if self.phase is Phase.INITIALISE:
                 self.phase = Phase.POSITIONING
@@ -93,27 +101,58 @@ class StrideMachine:
 
     def revise(self, plan: StridePlan) -> None:
         """A better plan for the same stride (the controller's stage 2), taken before touchdown."""
-        if self.phase in (Phase.POSITIONING, Phase.PRE_TOUCHDOWN, Phase.SAFE) and not self.single_stride:
-            self.plan, self.hold_angle, self.reason = plan, plan.touchdown_angle, ""
-            if self.phase is Phase.SAFE:
-                self.phase = Phase.POSITIONING
+        if self.phase in (Phase.POSITIONING, Phase.PRE_TOUCHDOWN, Phase.SAFE) and not self.single_stride \
+                and not self.in_stance:
+            self.plan, self.hold_angle = plan, plan.touchdown_angle
+            if not self.faulted:                 # (a fault's SAFE waits for the drive: `resume`)
+                self.reason = ""
+                if self.phase is Phase.SAFE:     # infeasible at stage 1, feasible now
+                    self.phase = Phase.POSITIONING
 
     def on_pre_touchdown(self) -> None:
         if self.phase is Phase.POSITIONING:
             self.phase = Phase.PRE_TOUCHDOWN
+        elif self._faulted_in is Phase.POSITIONING:
+            self._faulted_in = Phase.PRE_TOUCHDOWN
 
     def on_touchdown(self, time: float) -> None:
-        if self.phase in (Phase.POSITIONING, Phase.PRE_TOUCHDOWN):
+        self.in_stance = True
+        if self.phase in (Phase.POSITIONING, Phase.PRE_TOUCHDOWN) or self._faulted_in in (
+                Phase.POSITIONING, Phase.PRE_TOUCHDOWN):
             self.touchdown_time = time
-            self.phase = Phase.STANCE
+            if self.phase is Phase.SAFE:
+                self._faulted_in = Phase.STANCE
+            else:
+                self.phase = Phase.STANCE
 
     def on_liftoff(self, leg_angle: float) -> None:
-        if self.phase is Phase.STANCE:
+        self.in_stance = False
+        if self.phase in (Phase.STANCE, Phase.SAFE):
             self.hold_angle = leg_angle
+        if self.phase is Phase.STANCE:
             self.phase = Phase.ASCENT
+        self._faulted_in = None             # a fault's stride is over: SAFE holds the lift-off angle
 
     def fault(self, reason: str) -> None:
-        self.phase, self.reason = Phase.SAFE, reason
+        """A drive fault: SAFE until `resume` (the drive back) or the next apex."""
+        if self.phase in (Phase.POSITIONING, Phase.PRE_TOUCHDOWN, Phase.STANCE) and self.plan is not None:
+            self._faulted_in = self.phase
+        self.phase, self.reason, self.faulted = Phase.SAFE, reason, True
+
+    def resume(self) -> bool:
+        """The drive is back after a fault: the stride it interrupted goes on if it has not lifted
+        off yet (the leg positioned again before the touchdown; in the stance, the ramp from the
+        touchdown, which the motor driver starts at most its `max_ramp_age` back: the stride's impulse
+        late rather than lost, a stance without it cost 1.2 m/s and the robot fell). True if it did."""
+        if not self.faulted:
+            return False
+        self.faulted = False
+        if self._faulted_in is None:
+            return False
+        self.phase, self._faulted_in, self.reason = self._faulted_in, None, ""
+        if self.phase is not Phase.STANCE:
+            self.hold_angle = self.plan.touchdown_angle
+        return True
 
     # ------------------------------------------------------------------ output
     def command(self, now: float) -> tuple[int, float]:
@@ -124,7 +163,7 @@ class StrideMachine:
         if phase is Phase.STANCE:
             return MODE_CURRENT, ramp_torque(float(now - self.touchdown_time), float(self.plan.tau_0),
                                              float(self.plan.ramp_duration))       # (2.32)
-        if phase is Phase.PRE_TOUCHDOWN:
+        if phase is Phase.PRE_TOUCHDOWN or (phase is Phase.SAFE and self.in_stance):
             return MODE_CURRENT, 0.0
         if math.isfinite(self.hold_angle):
             return MODE_POSITION, self.hold_angle

@@ -40,8 +40,6 @@ from .deadbeat import DeadbeatController, StrideDecision
 from .stride_machine import MODE_DISABLED, Phase, StrideMachine, StridePlan
 
 MODE_RAMP = 3   # MotorCommand.MODE_RAMP: the driver runs the ramp (2.32) from the stamp
-FAULT_ACKNOWLEDGE = 0.1   # [s] MODE_DISABLED this long after a drive fault before the first stride: the
-                          #   motor driver resets a fault once the stream acknowledged it (docs/motor_driver.md)
 
 
 @dataclass(frozen=True)
@@ -55,6 +53,7 @@ class StrideSettings:
     sensing_timeout: float = 0.5        # [s] no gait event this long while hopping: sensing lost, drive disabled
     keep_alive_priority_boost: int = 10  # SCHED_FIFO priority of the node's repeating thread above its own
     brake_disable_delay: float = 0.5    # [s] single stride: braking this long, then the drive disabled
+    fault_acknowledge: float = 0.02     # [s] MODE_DISABLED this long after the last report of a drive fault
 
     @classmethod
     def from_mapping(cls, section: Mapping[str, Any], **overrides: Any) -> "StrideSettings":
@@ -102,7 +101,7 @@ class StridePolicy:
         self._drive_silent = False      # the motor driver says the drive (the robot) stands still
         self._frozen_time = 0.0         # [s] the time it stood still so far (the driver's count)
         self._frozen_at_prediction = 0.0
-        self._acknowledge = -math.inf   # a drive fault: MODE_DISABLED until then (FAULT_ACKNOWLEDGE)
+        self._acknowledge = -math.inf   # a drive fault: MODE_DISABLED until then (fault_acknowledge)
         self.sensing_lost = False
 
     @property
@@ -185,26 +184,31 @@ class StridePolicy:
         self._frozen_time = frozen_time
 
     def on_drive_fault(self, message: str) -> bool:
-        """The motor driver reports a drive fault or a lost drive: hold the leg, no torque. False
-        when the stride is in the safe state already. Either way the stream acknowledges it
-        (MODE_DISABLED for FAULT_ACKNOWLEDGE, the driver's cue to reset a fault): a fault while
-        hopping was never acknowledged (only a sensing chain silent for `sensing_timeout` disabled
-        the drive), so a drive that faulted once (its heartbeat consumer, the driver starved 15 ms
-        under load) stayed faulted, and the robot fell after every throw (63 times in a soak).
-        Before the first apex (no stride yet: the robot held, waiting for its throw) nothing
-        latches: a start-up that failed once (the simulated robot's hub not up yet) left the
-        controller safe, its drive disabled, and the demo waiting for an enabled drive forever."""
-        if self.machine.phase is Phase.SAFE:
+        """The motor driver reports a drive fault or a lost drive: no torque, and the stream
+        acknowledges it (MODE_DISABLED until `fault_acknowledge` after the last report, the driver's
+        cue to reset a fault). False for a report of a fault already acknowledged.
+
+        While hopping the stride is SAFE (no torque in stance, the leg held in flight) until the
+        drive is back; the stride goes on if its touchdown is still ahead (`StrideMachine.resume`),
+        else at the next apex. A fault is acknowledged in any phase: one acknowledged only by a
+        sensing chain silent for `sensing_timeout` left a drive that faulted once (its heartbeat
+        consumer, the driver starved 15 ms) faulted, and the robot fell after every throw (63 times in
+        a soak); one held SAFE with the leg held in position through the stance (a large hip torque)
+        threw the robot backwards, and it fell in the next stride. Before the first apex (the robot
+        held for its throw) nothing latches: a start-up that failed once (the simulated robot's hub
+        not up yet) left the demo waiting for an enabled drive forever."""
+        self._acknowledge = math.inf            # MODE_DISABLED from the next command on
+        if self.machine.faulted:
             return False
         self.counters["faults"] += 1
-        self._acknowledge = math.inf            # MODE_DISABLED for FAULT_ACKNOWLEDGE from the next command on
         if self.machine.phase in (Phase.IDLE, Phase.INITIALISE):
             self.events.append(("error", f"motor driver: {message} (no stride yet: acknowledged, the leg is held "
                                          "once the drive is back)"))
             return True
         self.machine.fault(f"motor driver: {message}")
-        self.events.append(("error", self.machine.reason + " (acknowledged: the stride after the next apex "
-                                                           "goes on once the drive is back)"))
+        self.controller.forget_stride()
+        self.events.append(("error", self.machine.reason + " (acknowledged: the stride goes on once the drive "
+                                                           "is back)"))
         return True
 
     # ------------------------------------------------------------------ output
@@ -222,9 +226,13 @@ class StridePolicy:
         if self.sensing_lost:
             return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp)
         if self._acknowledge == math.inf:
-            self._acknowledge = now + FAULT_ACKNOWLEDGE
+            self._acknowledge = now + s.fault_acknowledge
         if now < self._acknowledge:
             return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp)
+        if machine.faulted:
+            resumed = machine.resume()
+            self.events.append(("info", "drive fault acknowledged: " + (
+                "the stride goes on" if resumed else "no torque until the next apex")))
         mode, setpoint = machine.command(now)
         if machine.phase is Phase.BRAKE:
             if math.isnan(self._brake_since):
