@@ -72,15 +72,17 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         assert decision.predicted_apex_height == pytest.approx(0.39, abs=2e-3)
         flight = tick(after=ready)
         assert (flight.mode, flight.setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(decision.touchdown_angle))
-        # pre-touchdown: the ramp goes out now, stamped with the touchdown predicted from the event's state
+        # pre-touchdown, heard ahead of its time: at that time the leg is let go and the ramp goes out,
+        # stamped with the touchdown predicted from the event's state
         pre_touchdown = GaitEvent(type=GaitEvent.PRE_TOUCHDOWN)
-        soon = time.time() + 1.0                  # host clock: a prediction in the past would be cancelled
+        soon = time.time() + 0.3                  # host clock: a prediction in the past would be cancelled
         pre_touchdown.header.stamp = stamp(soon)
         state = pre_touchdown.state
         state.z, state.z_dot, state.leg_angle, state.leg_angle_rate = 0.205 * math.cos(0.4) + 0.02, -2.3, 0.4, 0.0
         events.publish(pre_touchdown)
         spin_until(executor, lambda: False, timeout=0.2)
         ahead = tick(after=flight)
+        assert time.time() >= soon - 0.005        # not before the event's time (the repeats: every 3 ms)
         params = load_params()
         expected = soon + touchdown_time(state.z, state.z_dot, 0.4, 0.0, params.rest_length, params.gravity,
                                           params.flight_damping_vertical)

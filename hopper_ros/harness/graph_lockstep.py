@@ -15,7 +15,9 @@ command ages run on it, as the nodes run on the host's clock: a step of the dela
 robot's process stalled (beyond sim/runner.py's RESYNC_AFTER its world stands still and its drive
 answers none of the SYNCs meanwhile; a shorter stall is caught up, the following samples in a burst,
 the drive taking one SYNC period of frames a step), a large delay of the first packets a late start
-(issue 29). `GraphRun.stances` is the stance ramp as the leg felt it.
+(issue 29). An event at time t reaches the controller `event_delay(t)` later on the host clock, in
+order, while its repeats run every period: the loop's container starved by a real-time process of
+its priority, the repeating thread above it on time. `GraphRun.stances` is the stance ramp as the leg felt it.
 """
 
 from __future__ import annotations
@@ -56,8 +58,11 @@ class GraphLockstep:
 
     def __init__(self, sim_config, hardware: HardwareConfig, controller: DeadbeatController,
                  driver_settings: DriverSettings | None = None, stride_settings: StrideSettings | None = None,
-                 host_delay: Callable[[float], float] = lambda t: 0.0) -> None:
+                 host_delay: Callable[[float], float] = lambda t: 0.0,
+                 event_delay: Callable[[float], float] = lambda t: 0.0) -> None:
         self.host_time = 0.0          # [s] the graph's clock (the nodes' host clock)
+        self.event_delay = event_delay   # [s] of an event's time: it reaches the controller this much later
+        self._events_in_transit: list[tuple[float, object]] = []   #   (its executor starved; the repeats on time)
         channel = f"graph_lockstep_{next(_CHANNELS)}"
         self._drive_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self._master_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
@@ -108,8 +113,9 @@ class GraphLockstep:
                 self._catching_up = True
         self.host_time = arrival
         output = self.sensing.process(packet_format.encode(sample.packet), self.host_time)
-        for event in output.events:
-            self._on_event(event, run)
+        self._events_in_transit += [(self.host_time + self.event_delay(event.time), event) for event in output.events]
+        while self._events_in_transit and self._events_in_transit[0][0] <= self.host_time:
+            self._on_event(self._events_in_transit.pop(0)[1], run)
         self._command()                          # the node's repeats: a thread of their own, every period here
         self._cycle(sync=gap >= 0.5 * period)    # the driver's SYNC period runs on the host clock: none in a burst
 

@@ -9,7 +9,7 @@ stride, so noise can never produce a second touchdown or a second apex:
   height is z_td = rho_0 cos(theta) with the current leg angle; the time the ballistic flight
   prediction reaches z_td + 2 cm is solved on the flight fit (below). The event is published on
   the first sample for which that time is at most `pre_touchdown_lead` ahead (the controller
-  learns it before it happens: negative detection lag).
+  learns it before it happens, and acts at its time: negative detection lag).
 - touchdown (flight; usually in descent, in ascent when the leg swings down faster than the body
   rises): the toe reaches the ground, h = z - rho_0 cos(theta) <= 0; the time is where h, linear
   between the two samples, is zero. The toe stays at y_toe = y + rho_0 sin(theta).
