@@ -36,7 +36,6 @@ STRIDES = 4
 def run(quick=False):
     os.environ["ROS_DOMAIN_ID"] = str(free_domain_id(77))
     apply_ros_environment()
-    from hopper_ros.hardware.config import load_hardware
     from hopper_ros.harness.live_graph import LiveGraph
 
     out = REPO / "bench" / "out" / "demo_respawn"
@@ -45,7 +44,7 @@ def run(quick=False):
     with LiveGraph("demo.launch.yaml", out) as graph:
         if not graph.wait_up():
             raise RuntimeError(f"the demo graph did not come up (see {out / 'launch.log'})")
-        graph.start_spy(load_hardware().can.port)
+        graph.start_spy(graph.can_port)
         if not graph.hop(STRIDES, throw=True):
             raise RuntimeError("the robot did not hop before the first kill")
         for label in ORDER:

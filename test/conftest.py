@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -21,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from hopper_ros.runtime.environment import free_domain_id, restore_default_stop_signals
+from hopper_ros.runtime.environment import free_domain_id, free_port, restore_default_stop_signals  # noqa: F401 - free_port: the tests import it from here
 
 REPO = Path(__file__).resolve().parent.parent
 SAFETY_TIMEOUT = 60.0  # [s] bound on any wait in the tests: a hang fails instead of blocking CI
@@ -43,13 +42,6 @@ RESTORED_SIGNALS = restore_default_stop_signals()
 def pytest_report_header(config):
     restored = f" (restored default {', '.join(RESTORED_SIGNALS)}: started with them ignored)" if RESTORED_SIGNALS else ""
     return f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST{restored}"
-
-
-def free_port(kind: int = socket.SOCK_STREAM) -> int:
-    """A loopback port nobody listens on now (TCP by default, UDP with SOCK_DGRAM)."""
-    with socket.socket(socket.AF_INET, kind) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def domain_id() -> int:

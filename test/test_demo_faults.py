@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.runtime.environment import realtime_scheduling_allowed
 from hopper_ros.harness.live_graph import LiveGraph
 
@@ -18,6 +19,11 @@ def test_killing_the_estimator_and_controller_container_disables_the_drive_and_i
                                                              "driver_priority:=0")
     with LiveGraph("demo.launch.yaml", tmp_path, arguments, env=dict(os.environ)) as graph:
         assert graph.wait_up(), graph.log_lines(0)[-20:]
+        # its robot on ports of its own: this graph beside a demo once took over the demo's drive
+        lines = [line for t, line in graph.log_lines(0)]
+        assert graph.can_port != load_hardware().can.port
+        assert any(f"CAN hub on 127.0.0.1:{graph.can_port}" in line for line in lines)
+        assert any(f"socketcand on can0@127.0.0.1:{graph.can_port}" in line for line in lines)
         kill = graph.kill("sensing")
         assert kill.respawned_at > kill.killed_at and kill.up_again_at > kill.respawned_at
         assert kill.others_ended == []

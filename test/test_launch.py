@@ -174,7 +174,7 @@ def test_show_args_and_print(hopper_cli):
     shown = hopper_cli("launch", "hopper_ros", "demo.launch.yaml", "realtime_priority:=0", "driver_priority:=0",
                        "--show-args")
     assert shown.wait() == 0 and shown.stdout == ("realtime_priority:=0\nrobot_priority:=50\ndriver_priority:=0\n"
-                                                  "robot_cpu:=\nloop_cpu:=\n")
+                                                  "encoder_port:=0\ncan_port:=0\nrobot_cpu:=\nloop_cpu:=\n")
     printed = hopper_cli("launch", "demo_500hz.launch.yaml", "--print")
     assert printed.wait() == 0
     assert [line.split(":")[0] for line in printed.stdout.splitlines()] == [

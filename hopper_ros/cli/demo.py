@@ -27,7 +27,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from hopper_ros.runtime.environment import REALTIME_PRIORITY_VAR, apply_realtime_priority, realtime_scheduling_allowed
+from hopper_ros.runtime.environment import (REALTIME_PRIORITY_VAR, apply_realtime_priority, realtime_scheduling_allowed,
+                                             robot_port_arguments)
 from hopper_ros.launch import launch_file_path
 
 HELP = "run the closed-loop Fig 5.5 demo on the simulated robot and report it"
@@ -85,7 +86,10 @@ def main(args: argparse.Namespace) -> int:
     log_path = out / "launch.log"
     print(f"demo: starting the graph ({launch_file.name}); node logs in {log_path}", flush=True)
     log = open(log_path, "w", encoding="utf-8")
-    launcher = subprocess.Popen([sys.executable, "-m", "hopper_ros.cli", "launch", str(launch_file)],
+    # the simulated robot on free ports of its own: a second graph on this machine (a test, a soak) never
+    # reaches its robot, nor it theirs (a file of the user's own gets no arguments it may not declare)
+    ports = robot_port_arguments() if launch in (DEFAULT_LAUNCH, FALLBACK_LAUNCH) else ()
+    launcher = subprocess.Popen([sys.executable, "-m", "hopper_ros.cli", "launch", str(launch_file), *ports],
                                 stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
     rows: list[StrideRow] = []
     problem = ""

@@ -56,7 +56,13 @@ class Kill:
 
 class LiveGraph:
     def __init__(self, launch_file: str, out_dir: Path, arguments: tuple[str, ...] = (), env: dict | None = None):
-        self.launch_file, self.out_dir, self.arguments = launch_file, Path(out_dir), arguments
+        """`arguments` of the launch file; its simulated robot gets free ports unless they say others."""
+        from hopper_ros.runtime.environment import robot_port_arguments
+
+        given = {argument.split(":=", 1)[0] for argument in arguments}
+        ports = tuple(a for a in robot_port_arguments() if a.split(":=", 1)[0] not in given)
+        self.launch_file, self.out_dir, self.arguments = launch_file, Path(out_dir), tuple(arguments) + ports
+        self.can_port = int(dict(a.split(":=", 1) for a in self.arguments)["can_port"])   # its robot's CAN hub
         self.env = dict(os.environ if env is None else env)
         self.lines: list[tuple[float, str]] = []          # (receive time, line) of the launcher's output
         self.pids: dict[str, int] = {}

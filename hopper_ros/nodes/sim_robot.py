@@ -63,9 +63,11 @@ class SimRobotNode(Node):
         hardware = load_hardware(param("hardware_file", "hardware.yaml", "hardware configuration (YAML)"))
         mode = param("mode", "realtime", "realtime or lockstep")
         can_setting = param("can", "hub", "hub, virtual:CHANNEL or none")
-        can_port = param("can_port", int(hardware.can.port), "TCP port of the CAN hub on 127.0.0.1")
+        can_port = param("can_port", int(hardware.can.port), "TCP port of the CAN hub on 127.0.0.1 (0: hardware.yaml)") \
+            or int(hardware.can.port)
         udp_host = param("udp_host", hardware.microcontroller.host, "where the encoder packets go")
-        udp_port = param("udp_port", hardware.microcontroller.port, "UDP port of the encoder packets")
+        udp_port = param("udp_port", hardware.microcontroller.port, "UDP port of the encoder packets (0: hardware.yaml)") \
+            or hardware.microcontroller.port
         enable = param("enable_effects", [""], "effects to switch on")
         disable = param("disable_effects", [""], "effects to switch off")
         switches = {name: True for name in enable if name} | {name: False for name in disable if name}

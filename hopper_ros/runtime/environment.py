@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 from pathlib import Path
 from typing import MutableMapping
 
@@ -226,6 +227,21 @@ def _bound_udp_ports() -> set[int]:
         for line in lines:
             ports.add(int(line.split()[1].rsplit(":", 1)[1], 16))
     return ports
+
+
+def free_port(kind: int = socket.SOCK_STREAM) -> int:
+    """A loopback port nobody listens on now (TCP by default, UDP with SOCK_DGRAM): a simulated
+    robot's own (demo.launch.yaml's `encoder_port`, `can_port`), so that a second graph on this
+    machine (a test beside the demo, a soak) never reaches another one's robot. A test's graph on
+    hardware.yaml's ports once took over a soak's drive (NMT pre-operational, two masters)."""
+    with socket.socket(socket.AF_INET, kind) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def robot_port_arguments() -> tuple[str, str]:
+    """demo.launch.yaml's arguments giving its simulated robot free loopback ports (`free_port`)."""
+    return f"encoder_port:={free_port(socket.SOCK_DGRAM)}", f"can_port:={free_port()}"
 
 
 def free_domain_id(seed: int | None = None) -> int:
