@@ -247,3 +247,31 @@ def test_a_mismatch_no_force_shows_is_located_by_trajectory(suite):
     assert "compression" in first.window, first.words()
     named = next(r for r in result.chosen if r.name == "toe_slip")
     assert abs(named.magnitude - 0.40) <= 0.2 * 0.40 and len(s["hits"]) == 1, result.verdict
+
+
+def test_identify_then_diagnose_closes_the_researchers_loop(hopper_cli, tmp_path):
+    """Issue 28's loop: a hip that delivers 0.75 of the commanded torque, the angle quantised only (as an
+    incremental encoder gives it, no white noise). `identify --effects torque_gain` finds the gain, and
+    `diagnose --model` with the model it wrote finds nothing left: the tool does not flag what the
+    researcher already modelled (it said "something unmodelled ... 45 x the noise level" once)."""
+    from independent_plant import effects as fx
+    from independent_plant.runner import NoiseSpec, write_csv
+    from independent_plant.suite import Spec, make_recording
+
+    columns, truth, _ = make_recording(Spec("gain_quantised", lambda: [fx.ActuatorGain(0.75)]),
+                                       noise=NoiseSpec(y_std=0.0, z_std=0.0, theta_std=0.0))
+    recording = tmp_path / "gain_quantised.csv"
+    write_csv(recording, *columns)
+    identified = tmp_path / "identified"
+    run = hopper_cli("identify", str(recording), "--effects", "torque_gain", "-o", str(identified), "--no-progress")
+    assert run.wait(150) == 0, run.stderr
+    model = identified / "identified_model.yaml"
+    from hopper_ros.physics.params import load_model
+
+    assert abs(load_model(model)[1]["torque_gain"] - 0.75) < 0.01
+    verdict = tmp_path / "verdict.json"
+    diagnosed = hopper_cli("diagnose", str(recording), "--model", str(model), "--json", str(verdict))
+    assert diagnosed.wait(150) == 0, diagnosed.stderr
+    result = json.loads(verdict.read_text())
+    assert "no significant mismatch" in diagnosed.stdout, diagnosed.stdout
+    assert result["verdict"] == [] and not any(site["above_noise"] for site in result["location"]), result["summary"]
