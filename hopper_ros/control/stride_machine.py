@@ -65,7 +65,7 @@ class StrideMachine:
         self.reason = ""
         self.in_stance = False              # the gait events' word, whatever the phase (SAFE follows it)
         self.faulted = False                # SAFE for a drive fault (until `resume` or the next apex)
-        self._faulted_in: Phase | None = None   # the flight phase a fault interrupted (resume goes back to it)
+        self._faulted_in: Phase | None = None   # the phase a fault interrupted before lift-off (resume: back to it)
 
     # ------------------------------------------------------------------ inputs
     def hold(self, angle: float) -> None:
