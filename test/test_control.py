@@ -126,6 +126,29 @@ def test_stride_machine_runs_fig_5_3():
     assert machine.command(2.2) == (MODE_POSITION, -0.25)
 
 
+def test_a_pre_touchdown_heard_ahead_lets_the_leg_go_at_its_time_not_when_heard():
+    """sensing.yaml `pre_touchdown_lead`: the event comes up to 20 ms before its time. The leg stays held
+    until then; from then on the ramp goes out, stamped with the touchdown predicted from the event's
+    state (on the policy's clock: simulated time here, no wall clock)."""
+    from hopper_ros.control.stride_policy import MODE_RAMP, StridePolicy
+
+    control = load_control()
+    policy = StridePolicy(DeadbeatController(load_params(), control.deadbeat), control.stride)
+    policy.on_setpoint(0.39, 2.0)
+    decision = policy.on_apex(0.39, 2.0, 1)
+    policy.on_sensing(0.0)
+    pre_touchdown = 0.2
+    z = 0.205 * math.cos(decision.touchdown_angle) + 0.02
+    policy.on_pre_touchdown(pre_touchdown, z, -1.7, decision.touchdown_angle, 0.0)   # heard at 0.185
+    held = policy.command(pre_touchdown - 0.015)
+    assert (held.mode, held.setpoint) == (MODE_POSITION, pytest.approx(decision.touchdown_angle))
+    assert policy.phase is Phase.POSITIONING
+    ramp = policy.command(pre_touchdown)
+    assert ramp.mode == MODE_RAMP and ramp.setpoint == pytest.approx(decision.tau_0)
+    assert pre_touchdown < ramp.time < pre_touchdown + 0.02                  # the predicted touchdown
+    assert policy.phase is Phase.PRE_TOUCHDOWN
+
+
 def test_a_drive_fault_keeps_the_stance_torque_free_and_the_stride_goes_on_when_the_drive_is_back():
     """SAFE for a fault: no position hold through a stance (a large hip torque, which threw the robot
     backwards); once the drive is back before lift-off the stride goes on: positioned again, or its
