@@ -17,6 +17,7 @@ import time
 
 import can
 import canopen
+import numpy as np
 import pytest
 
 from hopper_ros.canbus import epos2_objects as eo
@@ -290,7 +291,10 @@ def _run_ramp(r, tau_0, duration, stamp, steps):
 
 
 def _ramp_milliamps(tau_0, duration, elapsed):
-    return _milliamps(-tau_0 * (1.0 - elapsed / duration) if 0.0 <= elapsed < duration else 0.0)
+    """The ramp (2.32) averaged over the SYNC period the drive holds the setting (midpoint samples)."""
+    period = SETTINGS.sync_period
+    times = elapsed + (np.arange(2000) + 0.5) * period / 2000
+    return _milliamps(float(np.mean(np.where((times >= 0.0) & (times < duration), -tau_0 * (1.0 - times / duration), 0.0))))
 
 
 def test_ramp_mode_runs_the_stance_ramp_in_the_driver_from_its_start(rig):
@@ -317,11 +321,25 @@ def test_a_ramp_scheduled_ahead_waits_for_its_stamp_and_moves_to_a_new_one(rig):
     for t, milliamps in early:
         assert milliamps == pytest.approx(_ramp_milliamps(tau_0, duration, t - predicted), abs=1)
     assert early[0][1] == 0 and early[-1][1] != 0
-    measured = predicted + 0.002
+    measured = predicted + 0.0025                       # between two SYNCs
     late = _run_ramp(r, tau_0, duration, measured, 60)
     for t, milliamps in late:
         assert milliamps == pytest.approx(_ramp_milliamps(tau_0, duration, t - measured), abs=1)
     assert r.driver.counters["commands_rejected"] == 0
+
+
+@pytest.mark.parametrize("phase", [0.0, 0.25e-3, 0.5e-3, 0.9e-3])
+def test_the_ramp_gives_its_whole_impulse_wherever_the_touchdown_falls_between_two_syncs(rig, phase):
+    """The drive holds each current for a SYNC period: the period the touchdown falls in gets the ramp's
+    share of it, so the stance gets tau_0 t_f / 2 whatever the touchdown's phase (sampled at the SYNC, up
+    to a period of tau_0 was lost: the onset moved by up to 1 ms, the apex by about 0.1 cm)."""
+    r = rig().start()
+    r.enable(torque=1.0)
+    tau_0, duration = 6.0, 0.05
+    touchdown = r.clock.t + 0.004 + phase
+    seen = _run_ramp(r, tau_0, duration, touchdown, 70)
+    impulse = sum(milliamps for _, milliamps in seen) * SETTINGS.sync_period
+    assert impulse == pytest.approx(_milliamps(-tau_0) * duration / 2, abs=len(seen) * SETTINGS.sync_period)
 
 
 def test_command_watchdog_quick_stops_then_disables_and_recovers(rig):

@@ -50,6 +50,19 @@ def ramp_torque(t_stance, tau_0, ramp_duration):
     return where(inside, -tau_0 * (1.0 - t_stance / where(inside, ramp_duration, 1.0)), 0.0)
 
 
+def ramp_impulse(t_stance, tau_0, ramp_duration):
+    """The integral of (2.32)'s ramp from the touchdown to `t_stance` [N m s]: the angular impulse it gave
+    so far (0 before the touchdown, -tau_0 t_f / 2 once it is over). Floats only."""
+    t = min(max(t_stance, 0.0), ramp_duration)
+    return -tau_0 * (t - t * t / (2.0 * ramp_duration)) if ramp_duration > 0.0 else 0.0
+
+
+def mean_ramp_torque(t_from, t_to, tau_0, ramp_duration):
+    """(2.32)'s ramp averaged over [t_from, t_to) (times from the touchdown): the constant torque that gives
+    the same impulse there, for a drive that holds each setting for a period. Floats only."""
+    return (ramp_impulse(t_to, tau_0, ramp_duration) - ramp_impulse(t_from, tau_0, ramp_duration)) / (t_to - t_from)
+
+
 # ---------------------------------------------------------------------------- coefficients
 
 
