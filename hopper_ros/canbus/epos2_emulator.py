@@ -15,16 +15,15 @@ Malformed input never raises: it is counted in `malformed_frames` and answered l
 device (SDO abort, EMCY 0x8210 for an RPDO of the wrong length). Details: docs/canopen.md.
 
 The SDO server and the PDO engine are the generic CiA 301 pieces of hopper_ros/canbus/cia301/
-(`sdo_server`, `pdo`); this module holds the EPOS2: its dictionary's values and rules, NMT, heartbeat,
-EMCY and the error history, CiA 402 device control and the modes' regulation.
+(`sdo_server`, `pdo`), the SYNCs a stall hid are `stalled_syncs`'; this module holds the EPOS2: its
+dictionary's values and rules, NMT, heartbeat, EMCY and the error history, CiA 402 device control and
+the modes' regulation.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import struct
-from collections import deque
 
 import can
 
@@ -32,7 +31,7 @@ from hopper_ros.canbus import epos2_objects as od
 from hopper_ros.canbus.cia301.counters import Counters
 from hopper_ros.canbus.cia301.pdo import PdoEngine
 from hopper_ros.canbus.cia301.sdo_server import MAX_SEGMENTED_SIZE, SdoRefused, SdoServer
-from hopper_ros.canbus.cia301.values import decode, encode
+from hopper_ros.canbus.cia301.values import decode, encode, saturate, wrap_i32
 from hopper_ros.canbus.epos2_objects import (
     Command,
     NmtCommand,
@@ -41,6 +40,7 @@ from hopper_ros.canbus.epos2_objects import (
     SdoAbort,
     State,
 )
+from hopper_ros.canbus.stalled_syncs import StalledSyncs
 from hopper_ros.canbus.epos2_regulator import POSITION_LOOP_PERIOD, PositionGains, PositionRegulator
 from hopper_ros.hardware.config import HardwareConfig
 
@@ -51,9 +51,6 @@ _MS = 1.0e-3                       # [s/ms]
 #: time constant of the "averaged" feedback objects 0x2027 / 0x2028 [s] (emulation choice)
 AVERAGING_TIME_CONSTANT = 0.01
 _ENABLED_STATES = (State.OPERATION_ENABLED,)
-SYNC_INTERVAL_GUESS = 0.001       # [s] the SYNC period assumed until SYNCs came (the demo's 1 kHz)
-SYNC_INTERVAL_MAX = 0.01          # [s] SYNCs further apart than this are no period (a pause, the start)
-SYNC_INTERVALS_KEPT = 63          # the SYNC period is their median
 _SAMPLE_TOLERANCE = 0.999          # a control() call this close to one loop period counts as one
 
 # The drive's side of CiA 402 device control: a command is (controlword mask, value); per state, the
@@ -83,9 +80,7 @@ class Epos2Emulator:
         self._table = od.object_dictionary(self.node_id)
         self._indices = {index for index, _ in self._table}
         self.counters = Counters()
-        self._syncs_to_discard = 0           # discard_syncs: the next SYNCs came while the drive stood still
-        self._sync_intervals: deque[float] = deque(maxlen=SYNC_INTERVALS_KEPT)   # [s] between SYNCs (drive time)
-        self._last_sync = -math.inf
+        self._stalled = StalledSyncs()       # discard_syncs: the next SYNCs came while the drive stood still
         self.regulator = PositionRegulator.from_hardware(hardware)
         self._values: dict[tuple[int, int], int | str] = {}
         self.sdo = SdoServer(self.node_id, self, self._send, self.counters, MAX_SEGMENTED_SIZE)
@@ -204,9 +199,7 @@ class Epos2Emulator:
         of them is answered (`counters.syncs_missed`; counted by the SYNC period seen, as they may
         still be in transit). The motor driver counts the SYNCs left unanswered as the time the robot
         stood still."""
-        intervals = sorted(self._sync_intervals)
-        period = intervals[len(intervals) // 2] if intervals else SYNC_INTERVAL_GUESS   # a missed one is no period
-        self._syncs_to_discard += max(0, round(duration / period))
+        self._stalled.stood_still(duration)
 
     def _handle(self, msg: can.Message, now: float) -> bool:
         """Handle one frame; True if it was a SYNC."""
@@ -226,13 +219,9 @@ class Epos2Emulator:
         if cob == od.sdo_rx_cob_id(self.node_id):
             self.sdo.on_frame(data)
         elif cob == int(self._values[(od.COB_ID_SYNC, 0)]) & od.COB_ID_MASK_11BIT:
-            if self._syncs_to_discard > 0:
-                self._syncs_to_discard -= 1
+            if not self._stalled.take(now):
                 self.counters.syncs_missed += 1
                 return True
-            if 0.0 < now - self._last_sync < SYNC_INTERVAL_MAX:
-                self._sync_intervals.append(now - self._last_sync)
-            self._last_sync = now
             self.pdos.on_sync(data, now)
             return True
         elif self.pdos.rpdo_number(cob) is not None:
@@ -387,12 +376,12 @@ class Epos2Emulator:
         self._average_current += alpha * (current_a - self._average_current)
         self._average_velocity += alpha * (velocity_rpm - self._average_velocity)
         v = self._values
-        v[(od.POSITION_ACTUAL_VALUE, 0)] = _wrap_i32(int(position_counts))
+        v[(od.POSITION_ACTUAL_VALUE, 0)] = wrap_i32(int(position_counts))
         v[(od.ENCODER_COUNTER, 0)] = int(position_counts) & 0xFFFF
-        v[(od.VELOCITY_ACTUAL_VALUE, 0)] = _clip_i32(round(velocity_rpm))
-        v[(od.CURRENT_ACTUAL_VALUE, 0)] = _clip_i16(round(current_a / _MILLI))
-        v[(od.CURRENT_ACTUAL_VALUE_AVERAGED, 0)] = _clip_i16(round(self._average_current / _MILLI))
-        v[(od.VELOCITY_ACTUAL_VALUE_AVERAGED, 0)] = _clip_i32(round(self._average_velocity))
+        v[(od.VELOCITY_ACTUAL_VALUE, 0)] = saturate(round(velocity_rpm), 32)
+        v[(od.CURRENT_ACTUAL_VALUE, 0)] = saturate(round(current_a / _MILLI), 16)
+        v[(od.CURRENT_ACTUAL_VALUE_AVERAGED, 0)] = saturate(round(self._average_current / _MILLI), 16)
+        v[(od.VELOCITY_ACTUAL_VALUE_AVERAGED, 0)] = saturate(round(self._average_velocity), 32)
         self._heartbeat(now)
         self.demand = self._regulate(now, int(v[(od.POSITION_ACTUAL_VALUE, 0)]))
         v[(od.CURRENT_DEMAND_VALUE, 0)] = round(self.demand / _MILLI)
@@ -423,7 +412,7 @@ class Epos2Emulator:
         setpoint = int(v[(od.POSITION_MODE_SETTING_VALUE, 0)])
         v[(od.POSITION_DEMAND_VALUE, 0)] = setpoint
         following = setpoint - position
-        v[(od.FOLLOWING_ERROR_ACTUAL_VALUE, 0)] = _clip_i16(following)
+        v[(od.FOLLOWING_ERROR_ACTUAL_VALUE, 0)] = saturate(following, 16)
         if abs(following) > int(v[(od.MAX_FOLLOWING_ERROR, 0)]):
             self._raise_error(od.ERROR_FOLLOWING, now)
             return 0.0
@@ -502,18 +491,3 @@ class Epos2Emulator:
             self._consumer_last = None
         else:
             self.pdos.stored(entry.index)
-
-
-# -------------------------------------------------------------------- helpers
-
-
-def _wrap_i32(value: int) -> int:
-    return (value + (1 << 31)) % (1 << 32) - (1 << 31)
-
-
-def _clip_i32(value: int) -> int:
-    return max(-(1 << 31), min((1 << 31) - 1, int(value)))
-
-
-def _clip_i16(value: int) -> int:
-    return max(-(1 << 15), min((1 << 15) - 1, int(value)))

@@ -17,3 +17,13 @@ def decode(data_type: DataType, payload: bytes) -> int | str:
     if data_type == DataType.VISIBLE_STRING:
         return payload.decode("latin-1")
     return struct.unpack(DATA_TYPE_FORMAT[DataType(data_type)], payload)[0]
+
+
+def wrap_i32(value: int) -> int:
+    """An INTEGER32 counter that wraps (a position in counts)."""
+    return (value + (1 << 31)) % (1 << 32) - (1 << 31)
+
+
+def saturate(value: int, bits: int) -> int:
+    """A signed INTEGER of `bits` bits held at its range (a velocity, a current)."""
+    return max(-(1 << (bits - 1)), min((1 << (bits - 1)) - 1, int(value)))
