@@ -15,9 +15,9 @@ Malformed input never raises: it is counted in `malformed_frames` and answered l
 device (SDO abort, EMCY 0x8210 for an RPDO of the wrong length). Details: docs/canopen.md.
 
 The SDO server and the PDO engine are the generic CiA 301 pieces of hopper_ros/canbus/cia301/
-(`sdo_server`, `pdo`), the SYNCs a stall hid are `stalled_syncs`'; this module holds the EPOS2: its
-dictionary's values and rules, NMT, heartbeat, EMCY and the error history, CiA 402 device control and
-the modes' regulation.
+(`sdo_server`, `pdo`), the SYNCs a stall of the simulated robot hid from it are counted in
+`stalled_syncs`; this module holds the EPOS2: its dictionary's values and rules, NMT, heartbeat, EMCY
+and the error history, CiA 402 device control and the modes' regulation.
 """
 
 from __future__ import annotations
@@ -40,8 +40,8 @@ from hopper_ros.canbus.epos2_objects import (
     SdoAbort,
     State,
 )
-from hopper_ros.canbus.stalled_syncs import StalledSyncs
 from hopper_ros.canbus.epos2_regulator import POSITION_LOOP_PERIOD, PositionGains, PositionRegulator
+from hopper_ros.canbus.stalled_syncs import StalledSyncs
 from hopper_ros.hardware.config import HardwareConfig
 
 log = logging.getLogger(__name__)
