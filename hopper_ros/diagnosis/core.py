@@ -73,6 +73,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     left = completeness(model.errors, after, floor, residual_location, settings)
     dependences = []
     if not left.explained:      # what the accepted effects leave may depend on where along the track a stride is
+        progress.say("the floor's dependence on the place along the track")
         own = own_ramps(data)      # a floor at another height per stride moves each stance's start
         kept, modelled, dependences = _with_dependence(search, own, chosen, drifts, lap_length(settings))
         if dependences:
