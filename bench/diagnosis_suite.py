@@ -110,6 +110,17 @@ def score(result, truth: dict, threshold: float) -> dict:
             "physics_only": not any(e["site"].startswith("sensor") for e in truth["effects"])}
 
 
+def dependence_found(result, effect: dict, forms: set, used: set, tolerance: float = 0.25):
+    """The index and words of a dependence on the track position (`diagnosis.dependence`) of one of `forms` with
+    the concealed effect's magnitude within `tolerance` and not yet `used` (it is then), or None."""
+    want = float(effect["magnitude"])
+    for k, d in enumerate(result.dependences):
+        if k not in used and d.form in forms and abs(d.magnitude - want) <= tolerance * abs(want):
+            used.add(k)
+            return k, f"dependence ({d.form}) {1e3 * d.magnitude:.1f} mm (true {1e3 * want:.1f} mm)"
+    return None
+
+
 def diagnose_and_score(name: str, recording, truth: dict, verbose: bool = True) -> dict:
     """One recording diagnosed and scored: the row of a summary."""
     from hopper_ros.diagnosis import diagnose_file

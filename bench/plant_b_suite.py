@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import sys
 
-from diagnosis_suite import main, suite, summarise  # bench/ is on sys.path
+from diagnosis_suite import dependence_found, main, suite, summarise  # bench/ is on sys.path
 
 G, TOE_MASS, BODY_MASS = 11.42, 0.03, 2.20       # config/model.yaml, the plant's nominal model
 
@@ -47,6 +47,8 @@ MATCH = {
 # plant-B mechanism -> the main parameter whose drift (`diagnosis.drift`) is that mechanism, and the library entry
 # that holds the same parameter's level beside the trend (part of the same finding, not a verdict of its own)
 DRIFTS = {"spring_stiffness_drift": "stiffness"}
+# plant-B mechanism -> the forms of a dependence on the track position (`diagnosis.dependence`) that are it
+DEPENDENCES = {"undulating_floor": {"wave", "tilt"}}
 DRIFT_LEVEL = {"stiffness": "leg_stiffness", "damping": "leg_damping", "gravity": "effective_gravity",
                "rest_length": "rest_length"}
 
@@ -57,10 +59,14 @@ def score(result, truth: dict) -> dict:
     that drifts) against look-alikes (an entry without a conversion, discovered terms at a site where it acts),
     false verdicts (drifts included) and whether a clean recording was flagged."""
     used, hits, misses, by_mechanism = set(), [], [], []
-    drifts_used = set()
+    drifts_used, dependences_used = set(), set()
     for effect in truth["effects"]:
         names, sites = MATCH.get(effect["id"], ({}, set()))
         found = None
+        dependence = dependence_found(result, effect, DEPENDENCES.get(effect["id"], set()), dependences_used)
+        if dependence:
+            by_mechanism.append(effect["id"])
+            found = (None, dependence[1])
         for k, drift in enumerate(result.drifts):
             if DRIFTS.get(effect["id"]) == drift.parameter:
                 want = float(effect["magnitude"])
@@ -94,11 +100,13 @@ def score(result, truth: dict) -> dict:
             misses.append((effect["id"], effect["magnitude"]))
     false = [r.name for k, r in enumerate(result.chosen) if k not in used]
     false_drifts = [f"drift of {d.parameter}" for k, d in enumerate(result.drifts) if k not in drifts_used]
+    false_drifts += [f"dependence ({d.form})" for k, d in enumerate(result.dependences) if k not in dependences_used]
     return {"hits": hits, "misses": misses, "false_positives": false, "located": [], "effects": len(truth["effects"]),
             "clean": not truth["effects"], "physics_only": not any(e["site"].startswith("sensor")
                                                                     for e in truth["effects"]),
             "by_mechanism": by_mechanism, "false_verdicts": false + false_drifts,
-            "flagged": bool(result.chosen or result.drifts) or result.verdict != "no significant mismatch"}
+            "flagged": bool(result.chosen or result.drifts or result.dependences)
+            or result.verdict != "no significant mismatch"}
 
 
 run = suite(score, summarise, lambda s: (

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import sys
 
-from diagnosis_suite import main, suite  # bench/ is on sys.path
+from diagnosis_suite import dependence_found, main, suite  # bench/ is on sys.path
 
 
 # plant-C mechanism -> (library entries that are a look-alike of its law, discovered sites where it acts)
@@ -48,16 +48,23 @@ NEAR = {
 }
 # plant-C mechanism -> {the name an engine would give its own law: converter of plant C's magnitude}
 SAME: dict = {mechanism: {} for mechanism in NEAR}
+# plant-C mechanism -> the forms of a dependence on the track position (`diagnosis.dependence`) that are its law
+# (by mechanism) and those that are its floor alone (look-alike)
+DEPENDENCES = {"floor_board": ({"board"}, set()), "tilted_pivot": ({"tilt"}, {"wave"})}
 
 
 def score(result, truth: dict) -> dict:
     """By mechanism, look-alike, missed, false verdicts; whether a clean recording was flagged."""
-    used, by_mechanism, alike, misses = set(), [], [], []
+    used, by_mechanism, alike, misses, dependences_used = set(), [], [], [], set()
     for effect in truth["effects"]:
         names, sites = NEAR.get(effect["id"], (set(), set()))
         same = SAME.get(effect["id"], {})
         found = None
-        for k, r in enumerate(result.chosen):
+        own, floor_alone = DEPENDENCES.get(effect["id"], (set(), set()))
+        for forms, how in ((own, "mechanism"), (floor_alone, "alike")):
+            dependence = None if found else dependence_found(result, effect, forms, dependences_used)
+            found = (None, how, dependence[1]) if dependence else found
+        for k, r in enumerate(result.chosen if found is None else []):
             for option in [r] + list(r.ties):
                 c = option.candidate
                 if c.name in same:
@@ -79,7 +86,8 @@ def score(result, truth: dict) -> dict:
         (by_mechanism if found[1] == "mechanism" else alike).append((effect["id"], found[2]))
     false = [r.name for k, r in enumerate(result.chosen) if k not in used]
     false += [f"drift of {d.parameter}" for d in result.drifts]     # plant C has no drifting parameter
-    flagged = bool(result.chosen or result.drifts) or result.verdict != "no significant mismatch"
+    false += [f"dependence ({d.form})" for k, d in enumerate(result.dependences) if k not in dependences_used]
+    flagged = bool(result.chosen or result.drifts or result.dependences) or result.verdict != "no significant mismatch"
     return {"by_mechanism": by_mechanism, "alike": alike, "misses": misses, "false_verdicts": false,
             "effects": len(truth["effects"]), "clean": not truth["effects"], "flagged": flagged}
 

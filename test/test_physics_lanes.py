@@ -38,6 +38,7 @@ def _variants() -> list[laws.Coefficients]:
                 out.append(base.replace(**{name: tuple(terms)}, **knots))
     out.append(effects.apply(base, {"ground_compliance": 4e4, "actuator_lag": 0.004, "hip_dry_friction": 0.05,
                                     "toe_slip": 0.5})[0])
+    out += [base.replace(track_gravity=a) for a in (0.13, -0.13)]     # a tilted boom axis (diagnosis.dependence)
     return out
 
 

@@ -11,6 +11,7 @@ accepted by the rules of `acceptance`, one effect a round (`rounds`).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -21,7 +22,8 @@ from hopper_ros.recording.recordings import Recording
 
 from . import acceptance
 from .candidates import candidate_sites
-from .data import PHASES, StrideData, prepare
+from .data import PHASES, StrideData, own_ramps, prepare
+from .dependence import find_dependence, lap_length
 from .drift import find_drift
 from .locate import Location, fit_locations, locate
 from .lookalikes import discovered_look_alikes, fit_secondary
@@ -63,25 +65,83 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     progress.say("the accepted effects' secondary parameters and look-alikes")
     fit_secondary(search, chosen)
     discovered_look_alikes(search, chosen, log.discoveries)
+    state = _accepted(search, chosen, log, model, base_sim["series"], moves)
+    drifts = find_drift(data, state.current, settings)[:1]
+    after = drifts[0].after if drifts else state.after     # the model with the drift
+    floor = noise_floor(data, moves)
+    residual_location = state.residual_location
+    left = completeness(model.errors, after, floor, residual_location, settings)
+    dependences = []
+    if not left.explained:      # what the accepted effects leave may depend on where along the track a stride is
+        progress.say("the floor's dependence on the place along the track")
+        own = own_ramps(data)      # a floor at another height per stride moves each stance's start
+        kept, modelled, dependences = _with_dependence(search, own, chosen, drifts, lap_length(settings))
+        if dependences:
+            if len(kept) < len(chosen):
+                chosen, state = kept, _accepted(search, kept, log, model, base_sim["series"], moves)
+            after = dependences[0].after
+            residual_location = locate(own, modelled)[0]
+            left = completeness(model.errors, after, floor, residual_location, settings)
+    return Diagnosis(data, log.rounds, chosen, model.errors, after, _rms_table(state.final_sim, 0, data),
+                     _rms_table(state.final_sim, 1, data), base_sim["series"], state.final_sim["series"],
+                     state.first_location, residual_location, log.discoveries,
+                     verdict(chosen, residual_location if chosen or dependences else state.first_location,
+                             settings.locate_threshold, left, drifts, dependences),
+                     settings, dict(model_effects or {}), completeness=left, drifts=drifts, dependences=dependences)
+
+
+@dataclass
+class Accepted:
+    current: Variant                 # the model with the accepted effects
+    final_sim: dict                  # the model and it, simulated with their series
+    after: Errors                    # its held-out next-apex errors
+    first_location: list             # the model's locations, the accepted effects' fits among them
+    residual_location: list          # what the accepted effects leave located
+
+
+def _accepted(search: Search, chosen: list[Scored], log: Log, model: Reference, base_series: list,
+              moves) -> Accepted:
+    """What the accepted effects give (each one's cumulative held-out errors set on it); where nothing is accepted
+    nor located, the trajectory's location."""
+    data, settings = search.data, search.settings
     current = search.stack(chosen).variant()
     for r, errors in zip(chosen, search.cumulative_errors(chosen)):
         r.errors = errors
-    final_sim = simulate_variants(data, [base, current], keep_series=True)
+    final_sim = simulate_variants(data, [search.base, current], keep_series=True)
     after = search.held_out(chosen).errors if chosen else model.errors
     first_location = _with_chosen_sites(log.first_location, chosen, settings)
     if not chosen and all(loc.ratio < settings.locate_threshold for loc in first_location):
-        found = locate_by_trajectory(data, base_sim["series"], moves, settings)
+        found = locate_by_trajectory(data, base_series, moves, settings)
         first_location = [found] + first_location if found else first_location
     residual_location = locate(data, current)[0] if chosen else first_location
-    drifts = find_drift(data, current, settings)[:1]
-    after = drifts[0].after if drifts else after     # the model with the drift
-    left = completeness(model.errors, after, noise_floor(data, moves), residual_location, settings)
-    return Diagnosis(data, log.rounds, chosen, model.errors, after, _rms_table(final_sim, 0, data),
-                     _rms_table(final_sim, 1, data), base_sim["series"], final_sim["series"], first_location,
-                     residual_location, log.discoveries,
-                     verdict(chosen, residual_location if chosen else first_location, settings.locate_threshold, left,
-                             drifts),
-                     settings, dict(model_effects or {}), completeness=left, drifts=drifts)
+    return Accepted(current, final_sim, after, first_location, residual_location)
+
+
+def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drifts: list, lap: float):
+    """(the accepted effects kept, the model with them, the drift and the dependence, the dependence): the floor's
+    dependence on the track position beside the accepted effects, and without each effect that it makes
+    redundant, one at a time: an effect whose removal (the dependence refitted) leaves the held-out next apex
+    worse by less than `apex_improvement` stood in for the dependence (plant B's undulating floor: a horizontal
+    inertia of the boom)."""
+    settings = search.settings
+
+    def with_it(effects):
+        v = search.stack(effects).variant()
+        v = Variant(v.coefficients, v.sensors, {**v.per_stride, **{d.parameter: d.per_stride for d in drifts}})
+        found = find_dependence(own, v, settings, lap)
+        return effects, v, found
+
+    kept, variant, found = with_it(chosen)
+    while found and kept:
+        limit = found[0].after.total * (1.0 + settings.apex_improvement)
+        trials = [with_it([c for c in kept if c is not r]) for r in kept]
+        trials = [t for t in trials if t[2] and t[2][0].after.total <= limit]
+        if not trials:
+            break
+        kept, variant, found = min(trials, key=lambda t: t[2][0].after.total)
+    if found:
+        variant = Variant(variant.coefficients, variant.sensors, {**variant.per_stride, **found[0].per_stride})
+    return kept, variant, found
 
 
 def correlation_length(resid: np.ndarray) -> float:

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from hopper_ros.recording.recordings import Recording
-from hopper_ros.identification.strides import ExtractionSettings, extract_strides
+from hopper_ros.identification.strides import ExtractionSettings, extract_strides, ramp_from_torque
 from hopper_ros.physics.exact import Phase
 from hopper_ros.physics.params import ModelParams
 
@@ -72,15 +72,37 @@ def held_touchdown_angles(rec: Recording, strides, sigma_theta: float, hold: int
             ref = float(np.median(theta[j - hold:j]))
             if abs(theta[j] - ref) < limit and abs(theta[j - 1] - ref) < limit:
                 angles[i] = float(np.median(theta[j - hold:j + 1]))
-                after = slice(j + 1, min(j + 5, len(t)))
-                start = t[j]
-                if after.stop - after.start >= 2:    # where the stance's turning leaves the held angle
-                    slope, level = np.polyfit(t[after] - t[j], theta[after], 1)
-                    if abs(slope) > 0:
-                        start = t[j] + float(np.clip((angles[i] - level) / slope, 0.0, t[j + 1] - t[j]))
-                lead[i] = td - start
+                lead[i] = td - _turn_start(t, theta, j, angles[i])
                 break
     return angles, lead
+
+
+def _turn_start(t, theta, j: int, angle: float) -> float:
+    """Where the stance's turning leaves the held `angle`, j the last held sample: a line through the next 4."""
+    after = slice(j + 1, min(j + 5, len(t)))
+    if after.stop - after.start >= 2:
+        slope, level = np.polyfit(t[after] - t[j], theta[after], 1)
+        if abs(slope) > 0:
+            return t[j] + float(np.clip((angle - level) / slope, 0.0, t[j + 1] - t[j]))
+    return t[j]
+
+
+def stance_begins(data: "StrideData", window: float = 0.04) -> np.ndarray:
+    """[s] per stride where the held leg starts to turn, also when that is after the model's touchdown (where
+    `held_touchdown_angles`, searching back from it, stops): searched forward from 3 ms before that start to
+    `window` after the model's touchdown, the first of three samples 4 noise levels off the held angle on one
+    side; the model's touchdown where none is."""
+    rec, s = data.rec, data.strides
+    limit = 4.0 * data.sigma["theta"]
+    out = s.touchdown_time.copy()
+    for i, (td, angle) in enumerate(zip(s.touchdown_time, s.touchdown_angle)):
+        a, b = np.searchsorted(rec.t, [data.stance_start[i] - 0.003, td + window])
+        off = rec.theta[a:b + 1] - angle
+        side = np.where(off > limit, 1, np.where(off < -limit, -1, 0))
+        turned = np.flatnonzero((side[1:-2] != 0) & (side[1:-2] == side[2:-1]) & (side[1:-2] == side[3:]))
+        if turned.size:
+            out[i] = _turn_start(rec.t, rec.theta, a + int(turned[0]), angle)
+    return out
 
 
 def _ramp_from_stance_start(strides, lead: float) -> None:
@@ -92,6 +114,28 @@ def _ramp_from_stance_start(strides, lead: float) -> None:
     new_ramp = np.where(timed, ramp + lead, ramp)
     strides.tau_0 = np.where(timed, strides.tau_0 * new_ramp / np.where(timed, ramp, 1.0), strides.tau_0)
     strides.ramp_duration = new_ramp
+
+
+def own_ramps(data: "StrideData") -> "StrideData":
+    """A copy whose ramps are read from the logged torque from each stride's own start of stance (where it is
+    more than `LEAD_RESOLVED` from the model's touchdown), as a floor at another height per stride has them: a
+    stance that begins late leaves the torque's first samples after the model's touchdown at zero, read as no
+    ramp. Unchanged where the recording logs the commands."""
+    s, rec = data.strides, data.rec
+    if rec.commands:
+        return data
+    begins = stance_begins(data)
+    lead = s.touchdown_time - begins
+    if not np.any(np.abs(lead) > LEAD_RESOLVED):
+        return data
+    strides = s.subset(np.arange(len(s)))
+    settings = ExtractionSettings()
+    for i in np.flatnonzero(np.abs(lead) > LEAD_RESOLVED):
+        start, end = begins[i], s.liftoff_time[i]
+        a, b = np.searchsorted(rec.t, [start, end])
+        strides.tau_0[i], strides.ramp_duration[i] = ramp_from_torque(rec.t[a:b] - start, rec.tau[a:b], end - start,
+                                                                      settings)
+    return replace(data, strides=strides)
 
 
 @dataclass(repr=False)

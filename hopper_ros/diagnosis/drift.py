@@ -2,13 +2,11 @@
 heats, a joint that wears, a bolt that loosens) while the model holds it constant.
 
 After the accepted effects each main parameter p (k, d, g, rho_0) is given a linear trend over the recording,
-p_i = p (1 + a + b s_i), s_i the stride's time from the recording's middle over its length. The next apexes'
-change with p comes from one moved re-simulation per stride; (a, b) are fitted to the next-apex residuals
-(normalised as E_p, E_v, E_t) on the training folds and judged by re-simulating the held-out strides with their
-own p_i. A trend stands when it fits held-out strides better than the same parameter held constant (its one-sided
-t over strides at least `min_t`) and lowers the held-out E_p + E_v + E_t by `drift_share` (a trend
-that removes less leaves a larger mismatch it may stand in for); it is then said with
-its size and rate and modelled (the variant's `per_stride` values).
+p_i = p (1 + a + b s_i), s_i the stride's time from the recording's middle over its length, fitted and judged on
+held-out strides by `perstride` against the same parameter held constant. A trend stands when its one-sided t
+over strides is at least `min_t` and it lowers the held-out E_p + E_v + E_t by `drift_share` (a trend that removes
+less leaves a larger mismatch it may stand in for); it is then said with its size and rate and modelled (the
+variant's `per_stride` values).
 """
 
 from __future__ import annotations
@@ -17,16 +15,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .acceptance import paired_t
+from . import perstride
 from .data import StrideData
+from .perstride import Parameter
 from .records import Errors
 from .search import folds
-from .simulate import Variant, simulate_variants
+from .simulate import Variant
 
-# coefficient -> (words, relative step of the sensitivity's re-simulation)
-PARAMETERS = {"stiffness": ("the leg stiffness k", 0.01), "damping": ("the leg damping d", 0.05),
-              "gravity": ("the effective gravity g", 0.005), "rest_length": ("the leg's rest length rho_0", 0.005)}
-OUTPUTS = ("height", "length", "speed", "time")
+PARAMETERS = (Parameter("stiffness", "the leg stiffness k", 0.01), Parameter("damping", "the leg damping d", 0.05),
+              Parameter("gravity", "the effective gravity g", 0.005),
+              Parameter("rest_length", "the leg's rest length rho_0", 0.005))
 
 
 @dataclass
@@ -51,16 +49,6 @@ class Drift:
                 "held_out_after": self.after.as_dict()}
 
 
-def _normalised(data: StrideData, pred: dict) -> np.ndarray:
-    """(strides, 4) next-apex residuals, recorded - predicted, in the units of E_p, E_v, E_t [%]."""
-    s = data.strides
-    scale = np.hypot(s.next_apex_height, s.stride_length)
-    recorded = {"height": s.next_apex_height, "length": s.stride_length, "speed": s.next_forward_speed,
-                "time": s.stride_time}
-    units = {"height": scale, "length": scale, "speed": np.abs(s.next_forward_speed), "time": s.stride_time}
-    return np.column_stack([100.0 * (recorded[k] - pred[k]) / units[k] for k in OUTPUTS])
-
-
 def find_drift(data: StrideData, variant: Variant, settings) -> list[Drift]:
     """The main parameters whose trend over the recording stands on held-out strides, strongest first."""
     s = data.strides
@@ -72,44 +60,24 @@ def find_drift(data: StrideData, variant: Variant, settings) -> list[Drift]:
         return []
     when = (s.apex_time - 0.5 * (s.apex_time[0] + s.apex_time[-1])) / span      # -1/2 .. 1/2
     fold = folds(n, settings.folds)
-    sim = simulate_variants(data, [variant])
-    base = {k: v[0] for k, v in sim["pred"].items()}
-    residual = _normalised(data, base)
+    ones, trend = np.ones((n, 1)), when[:, None]
+    forms = {"constant": [(ones,)], "trend": [(ones, trend)]}
     found = []
-    for name, (words, step) in PARAMETERS.items():
-        value = float(getattr(variant.coefficients, name))
-        moved = simulate_variants(data, [variant.with_changes({name: value * (1.0 + step)})])["pred"]
-        slope = (_normalised(data, base) - _normalised(data, {k: v[0] for k, v in moved.items()})) / step
-        ok = np.all(np.isfinite(slope), axis=1) & np.all(np.isfinite(residual), axis=1)
+    for p in PARAMETERS:
+        residual, slope, ok = perstride.sensitivity(data, variant, [p])
         if ok.sum() < 4 * settings.folds:
             continue
-        held = {"constant": np.zeros(n), "trend": np.zeros(n)}
-        for k in range(settings.folds):
-            train, test = ok & (fold != k), fold == k
-            for form, columns in (("constant", (np.ones(n),)), ("trend", (np.ones(n), when))):
-                design = np.stack([(slope[train] * c[train, None]).ravel() for c in columns], axis=1)
-                coef, *_ = np.linalg.lstsq(design, residual[train].ravel(), rcond=None)
-                change = sum(cf * c for cf, c in zip(coef, columns))
-                held[form][test] = change[test]
+        held = {form: perstride.held_out(slope, residual, ok, fold, settings.folds, bases)
+                for form, bases in forms.items()}
         # judged by re-simulation: every held-out stride with the value its training folds gave it
-        sse = {}
-        errors = {}
-        for form, relative in held.items():
-            trial = Variant(variant.coefficients, variant.sensors,
-                            {**variant.per_stride, name: value * (1.0 + relative)})
-            pred = {k: v[0] for k, v in simulate_variants(data, [trial])["pred"].items()}
-            r = _normalised(data, pred)
-            sse[form] = np.where(np.all(np.isfinite(r), axis=1), np.sum(r * r, axis=1), np.inf)
-            errors[form] = Errors.of(data, pred)
-        both = np.isfinite(sse["constant"]) & np.isfinite(sse["trend"])
-        t = paired_t(sse["constant"][both], sse["trend"][both]) if both.sum() >= 4 * settings.folds else 0.0
-        gain = 1.0 - errors["trend"].total / max(errors["constant"].total, 1e-12)
+        sse, errors = perstride.judge(data, variant, [p], held)
+        t, gain = perstride.stands(sse, errors, "constant", "trend", 4 * settings.folds)
         if not (t >= settings.min_t and gain >= settings.drift_share):
             continue
-        design = np.stack([slope[ok].ravel(), (slope[ok] * when[ok, None]).ravel()], axis=1)
-        (a, b), *_ = np.linalg.lstsq(design, residual[ok].ravel(), rcond=None)
+        _, (a, b), _ = perstride.fit(slope, residual, ok, forms["trend"])
+        value = float(getattr(variant.coefficients, p.name))
         per_stride = value * (1.0 + a + b * when)
         first, last = value * (1.0 + a - 0.5 * b), value * (1.0 + a + 0.5 * b)
         change = 100.0 * (last - first) / first
-        found.append(Drift(name, words, change, change / span, t, errors["constant"], errors["trend"], per_stride))
+        found.append(Drift(p.name, p.words, change, change / span, t, errors["constant"], errors["trend"], per_stride))
     return sorted(found, key=lambda d: -d.t)

@@ -173,7 +173,7 @@ def twins(data: StrideData, variant: Variant, seed: int = 0):
     """The model's own versions of the recorded strides: (clean, noisy) lists of (t, y, z, theta) per stride,
     t from the apex, with the recording's sensor noise and quantisation on the noisy one."""
     s, sensors = data.strides, variant.sensors
-    res = lanes.simulate_lanes(lanes.broadcast(variant.coefficients, len(s)),
+    res = lanes.simulate_lanes(variant.lane_coefficients(len(s)),
                                (s.apex_height - sensors["z_offset"]) / sensors["z_scale"],
                                s.forward_speed / sensors["y_scale"], _held_angles(data, sensors), s.tau_0,
                                s.ramp_duration, duration=data.duration + 0.02)
@@ -230,7 +230,6 @@ def _recorded(data: StrideData, sensors: dict):
 def residual_sets(data: StrideData, variant: Variant):
     """Residuals of the recording and of its clean and noisy twins under `variant` (lists per stride)."""
     s = data.strides
-    c = variant.coefficients
     held = _held_angles(data, variant.sensors)
     clean, noisy = twins(data, variant)
     result = []
@@ -242,7 +241,7 @@ def residual_sets(data: StrideData, variant: Variant):
                 continue
             t, y, z, th = item
             rows.append(stride_residuals(t, y, z, th, float(held[i]), float(s.tau_0[i]),
-                                         float(s.ramp_duration[i]), c))
+                                         float(s.ramp_duration[i]), variant.stride_coefficients(i)))
         result.append(rows)
     return result
 
@@ -366,10 +365,12 @@ def timing_location(data: StrideData, variant: Variant) -> Location | None:
     """Touchdown in time: stance begins (the held leg starts to turn, `data.held_touchdown_angles`) away from
     where the variant's leg at rest length meets its ground in the recorded height and angle (its sensor
     faults undone); size over noise as the median's t / 3."""
-    rec, c, sensors = data.rec, variant.coefficients, variant.sensors
+    rec, sensors = data.rec, variant.sensors
     height = (rec.z - sensors["z_offset"]) / sensors["z_scale"]
     leads = []
-    for td, start, angle in zip(data.strides.touchdown_time, data.stance_start, data.strides.touchdown_angle):
+    for i, (td, start, angle) in enumerate(zip(data.strides.touchdown_time, data.stance_start,
+                                               data.strides.touchdown_angle)):
+        c = variant.stride_coefficients(i)
         a = int(np.searchsorted(rec.t, td))
         k = np.arange(max(a - 40, 1), min(a + 10, len(rec.t)))
         held = (angle - sensors["theta_offset"]) / sensors["theta_scale"]

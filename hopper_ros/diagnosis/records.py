@@ -127,6 +127,7 @@ class Diagnosis:
     model_effects: dict
     completeness: "Completeness | None" = None   # what the accepted effects leave against the noise floor
     drifts: list = field(default_factory=list)   # drift.Drift of a main parameter over the recording, modelled
+    dependences: list = field(default_factory=list)   # dependence.Dependence on the track position, modelled
     wall_time: float = 0.0
     report: object = None            # path of diagnosis.md when written
     json: object = None              # path of the JSON when written

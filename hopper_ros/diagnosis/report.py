@@ -34,16 +34,18 @@ def _finite(value):
     return value
 
 
-def verdict(chosen: list, left: list | None = None, threshold: float = math.inf, complete=None, drifts=()) -> str:
+def verdict(chosen: list, left: list | None = None, threshold: float = math.inf, complete=None, drifts=(),
+            dependences=()) -> str:
     """The `missing:` line; a located residual that nothing explains is named as such, not hidden; with
     `complete` (`records.Completeness`) whether the accepted effects explain the mismatch or how much is left;
-    a drift of a main parameter (`drift.Drift`) said with its size and rate."""
+    a drift of a main parameter (`drift.Drift`) said with its size and rate, a dependence on the track position
+    (`dependence.Dependence`) with its size and place."""
     unexplained = [loc for loc in (left or []) if loc.ratio >= threshold]
     tail = ""
     if unexplained:
         tail = ("; unexplained: " + "; ".join(loc.words() for loc in unexplained[:2])
                 + " (no library effect or discovered term fits it)")
-    if not chosen and not drifts:
+    if not chosen and not drifts and not dependences:
         if not unexplained:
             if complete is None or complete.explained:
                 return "no significant mismatch"
@@ -65,6 +67,7 @@ def verdict(chosen: list, left: list | None = None, threshold: float = math.inf,
             text += " (or " + " or ".join(t.name for t in r.ties) + ": not separable on this data)"
         parts.append(text)
     parts += [f"drift: {d.sentence()}" for d in drifts]
+    parts += [f"dependence: {d.sentence()}" for d in dependences]
     if complete is not None:   # says what `tail` says, with how much is left
         tail = "; " + complete.words()
     return "missing: " + ", ".join(parts) + tail
@@ -138,6 +141,7 @@ def write_json(result, path: Path) -> Path:
            "stance_begins_before_model_touchdown_s": result.data.touchdown_lead,
            "completeness": result.completeness.as_dict() if result.completeness else None,
            "drift": [d.as_dict() for d in result.drifts],
+           "dependence": [d.as_dict() for d in result.dependences],
            "model_effects": result.model_effects}
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(_finite(doc), indent=2, allow_nan=False), encoding="utf-8")

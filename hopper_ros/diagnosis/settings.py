@@ -41,6 +41,10 @@ class Settings:
     floor_factor: float = 2.0        # held-out next-apex errors within this many times their noise floor: explained
     drift_share: float = 0.5         # a main parameter's trend must remove this share of the held-out E_p+E_v+E_t
     explained_left_pct: float = 5.0  # ... or at most this share of the model's excess over the floor left [%]
+    dependence_share: float = 0.5    # the floor varying along the track must remove this share of E_p+E_v+E_t too
+    track_lap: float = 0.0           # [m] one lap of the forward position (0: the boom's, from hardware.yaml)
+    track_harmonics: int = 3         # waves of 1 .. this many periods a lap tried
+    track_bins: int = 24             # a board's edges on this grid a lap
     secondary_grid: int = 5          # values of an accepted entry's secondary parameter tried (geometric)
 
 
@@ -55,6 +59,7 @@ LIMITS = {
     "locate_threshold": {"gt": 0}, "screen": _COUNT, "screen_strides": _COUNT, "liftoff_window": {"gt": 0, "unit": "s"},
     "exchange": {"ge": 0}, "polish": {"ge": 0}, "restarts": {"ge": 0}, "restart_threshold": {"gt": 0},
     "trajectory_threshold": {"gt": 0}, "floor_factor": {"gt": 0}, "drift_share": _SHARE,
+    "dependence_share": _SHARE, "track_lap": {"ge": 0, "unit": "m"}, "track_harmonics": _COUNT, "track_bins": {"ge": 4},
     "explained_left_pct": {"ge": 0, "le": 100, "unit": "%"}, "secondary_grid": _COUNT,
 }
 

@@ -34,11 +34,24 @@ FIELDS = laws.Coefficients.scalar_names() + laws.Coefficients.term_names()
 class Variant:
     coefficients: laws.Coefficients
     sensors: dict = field(default_factory=lambda: dict(SENSOR_OFF))
-    per_stride: dict = field(default_factory=dict)   # scalar coefficient -> its value per stride (a drift: `drift`)
+    per_stride: dict = field(default_factory=dict)   # scalar coefficient -> its value per stride (`perstride`)
 
     def with_changes(self, coefficients: dict | None = None, sensors: dict | None = None) -> "Variant":
         c = self.coefficients.replace(**coefficients) if coefficients else self.coefficients
         return Variant(c, {**self.sensors, **(sensors or {})}, dict(self.per_stride))
+
+    def stride_coefficients(self, i: int) -> laws.Coefficients:
+        """The coefficients of stride i (its per-stride values in place)."""
+        if not self.per_stride:
+            return self.coefficients
+        return self.coefficients.replace(**{name: float(values[i]) for name, values in self.per_stride.items()})
+
+    def lane_coefficients(self, strides: int) -> laws.Coefficients:
+        """One lane per stride, each with its per-stride values."""
+        coef = lanes.broadcast(self.coefficients, strides)
+        for name, values in self.per_stride.items():
+            getattr(coef, name)[:] = values
+        return coef
 
 
 def variant_key(variant: Variant) -> tuple:

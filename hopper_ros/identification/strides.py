@@ -260,7 +260,7 @@ def _segment_strides(rec: Recording, segment: slice, rho_0: float, s: Extraction
             if command.profile == "constant":
                 ramp = s.max_ramp_duration
         else:
-            tau_0, ramp = _ramp_from_torque(t[a:b] - td, tau[a:b], lo - td, s)
+            tau_0, ramp = ramp_from_torque(t[a:b] - td, tau[a:b], lo - td, s)
         start = offset + int(np.searchsorted(t, opening[0]))
         stop = offset + int(np.searchsorted(t, closing[0], side="right"))
         rows.append((opening[1], opening[3], touchdown_angle, tau_0, ramp, closing[1], closing[3], closing[2] - opening[2],
@@ -315,7 +315,7 @@ def _command_for(rec: Recording, flight_start: float, touchdown: float):
     return chosen
 
 
-def _ramp_from_torque(since: np.ndarray, tau: np.ndarray, stance_time: float, s: ExtractionSettings):
+def ramp_from_torque(since: np.ndarray, tau: np.ndarray, stance_time: float, s: ExtractionSettings):
     """(tau_0, t_f) of the ramp -tau_0 (1 - t/t_f) (2.32) through the stance torque samples."""
     # away from both ends: the drive lags at touchdown, and the detected lift-off is late, so
     # the last stance samples may already hold the flight's leg regulator torque

@@ -86,6 +86,7 @@ class Coefficients:
     flight_friction_y: object = 0.0         # [m/s^2] dry friction of the boom about its vertical axis
     flight_friction_z: object = 0.0         # [m/s^2] ... about its horizontal axis
     horizontal_mass_ratio: object = 0.0     # r: horizontal effective mass m_b (1 + r) (the boom's inertia)
+    track_gravity: object = 0.0             # [m/s^2] gravity along the track (a tilted boom axis), every phase
     # touchdown
     touchdown_loss_along: object = 0.0      # share of the velocity along the leg lost at touchdown
     touchdown_loss_across: object = 0.0     # share of the velocity across the leg lost at touchdown
@@ -163,7 +164,7 @@ def active(c: Coefficients) -> frozenset:
 
 # the coefficients whose law is skipped where they are 0 (`is_on`); ground_friction is on where finite, and a
 # `*_terms` field where any of its coefficients is not 0
-GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "spring_cubic", "spring_preload",
+GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "spring_cubic", "spring_preload",
          "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness")
 
 
@@ -189,6 +190,8 @@ def flight_acceleration(c: Coefficients, y, z, ydot, zdot):
         ay = ay - c.flight_friction_y * smooth_sign(ydot)
     if is_on(c, "flight_friction_z"):
         az = az - c.flight_friction_z * smooth_sign(zdot)
+    if is_on(c, "track_gravity"):
+        ay = ay + c.track_gravity
     if is_on(c, "flight_y_terms") or is_on(c, "flight_z_terms"):
         context = FlightContext(y, z, ydot, zdot, c.flight_z_knot)
         ay = ay + sum_terms(flight_y_term, c.flight_y_terms, context) / c.mass
@@ -287,6 +290,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
         rho_dot = rho_dot + sin * toe_rate
     force = spring_only - c.damping * rho_dot
     ydd = (-force * sin - across * cos) / (c.mass * (1.0 + c.horizontal_mass_ratio))
+    if is_on(c, "track_gravity"):
+        ydd = ydd + c.track_gravity
     zdd = (force * cos - across * sin) / c.mass - c.gravity
     return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, toe_rate, ydd, zdd)
 
