@@ -102,9 +102,6 @@ class StridePolicy:
         self._drive_silent = False      # the motor driver says the drive (the robot) stands still
         self._frozen_time = 0.0         # [s] the time it stood still so far (the driver's count)
         self._frozen_at_prediction = 0.0
-        self._frozen_before_silence = 0.0  # [s] the driver's count when the latest silence began ...
-        self._went_on = -math.inf       # ... and when it ended (the clock of `command`)
-        self._going_on = False
         self._acknowledge = -math.inf   # a drive fault: MODE_DISABLED until then (fault_acknowledge)
         self.sensing_lost = False
 
@@ -163,13 +160,6 @@ class StridePolicy:
         self._predicted_touchdown = time + self.time_to_touchdown(z, z_dot, leg_angle, leg_angle_rate) \
             if self.settings.ramp_ahead else math.nan
         self._frozen_at_prediction = self._frozen_time
-        if time < self._sensed and (self._drive_silent or time < self._went_on):
-            # heard after its instant, during a stand-still or of an instant before its end: the first state
-            # after a stand-still is stamped on the sensing clock as it stood before (re-anchored a state
-            # later), so this prediction lies the stand-still ago; its deadline moves by it as the driver
-            # moves the ramp (else the deadline was past at once and the stance had no ramp). After a stall
-            # that was caught up the driver counted nothing: no move.
-            self._frozen_at_prediction = self._frozen_before_silence
         self._cancelled_ramp = False
 
     def time_to_touchdown(self, z: float, z_dot: float, leg_angle: float, leg_angle_rate: float) -> float:
@@ -195,9 +185,6 @@ class StridePolicy:
     def on_drive_silence(self, silent: bool, frozen_time: float) -> None:
         """The motor driver's word on the drive: `silent` while it answers no SYNC (the robot stands
         still), `frozen_time` [s] the time it stood still so far."""
-        if silent and not self._drive_silent:
-            self._frozen_before_silence = self._frozen_time
-        self._going_on = self._going_on or (self._drive_silent and not silent)
         self._drive_silent = bool(silent)
         if not math.isfinite(frozen_time):
             return
@@ -237,8 +224,6 @@ class StridePolicy:
     def command(self, now: float, now_stamp: Any = None) -> Command:
         """The motor command for the instant `now`."""
         machine, s = self.machine, self.settings
-        if self._going_on:
-            self._went_on, self._going_on = now, False
         if now >= self._release_at:
             self._release_at = math.inf
             machine.on_pre_touchdown()
