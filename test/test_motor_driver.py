@@ -290,10 +290,11 @@ def _run_ramp(r, tau_0, duration, stamp, steps):
     return seen
 
 
-def _ramp_milliamps(tau_0, duration, elapsed):
-    """The ramp (2.32) averaged over the SYNC period the drive holds the setting (midpoint samples)."""
+def _ramp_milliamps(tau_0, duration, since_start):
+    """The ramp (2.32) averaged over the SYNC period the drive holds the setting (midpoint samples);
+    `since_start` is simulated time from the ramp's start, not a wall clock."""
     period = SETTINGS.sync_period
-    times = elapsed + (np.arange(2000) + 0.5) * period / 2000
+    times = since_start + (np.arange(2000) + 0.5) * period / 2000
     return _milliamps(float(np.mean(np.where((times >= 0.0) & (times < duration), -tau_0 * (1.0 - times / duration), 0.0))))
 
 
