@@ -229,14 +229,23 @@ def _bound_udp_ports() -> set[int]:
     return ports
 
 
+PORT_DRAWS = 20                 # free_port: tries for a port this process has not handed out yet
+_HANDED_OUT: set[int] = set()
+
+
 def free_port(kind: int = socket.SOCK_STREAM) -> int:
     """A loopback port nobody listens on now (TCP by default, UDP with SOCK_DGRAM): a simulated
     robot's own (demo.launch.yaml's `encoder_port`, `can_port`), so that a second graph on this
     machine (a test beside the demo, a soak) never reaches another one's robot. A test's graph on
     hardware.yaml's ports once took over a soak's drive (NMT pre-operational, two masters)."""
-    with socket.socket(socket.AF_INET, kind) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
+    for _ in range(PORT_DRAWS):
+        with socket.socket(socket.AF_INET, kind) as probe:
+            probe.bind(("127.0.0.1", 0))
+            port = probe.getsockname()[1]
+        if port not in _HANDED_OUT:     # two draws before either node bound could give one port twice
+            break                       #   ("Address already in use", a clean clone's test_environment once)
+    _HANDED_OUT.add(port)
+    return port
 
 
 def robot_port_arguments() -> tuple[str, str]:
