@@ -149,6 +149,42 @@ def test_a_pre_touchdown_heard_ahead_lets_the_leg_go_at_its_time_not_when_heard(
     assert policy.phase is Phase.PRE_TOUCHDOWN
 
 
+def test_the_ramps_instants_follow_the_sensing_clock_when_it_re_anchors():
+    """The robot stood still 80 ms after a pre-touchdown event (the simulated robot's process stopped):
+    the sensing clock re-anchors by that time, and the next event's state says so (its stamp minus its
+    robot time). The ramp predicted before is kept on the robot's clock and goes out on the new mapping
+    with it (`clock_offset`: the driver's cue), and so is a touchdown measured before the step; the
+    missed-touchdown deadline counts the stand-still once, in the stamps or in the driver's count."""
+    from hopper_ros.control.stride_policy import MODE_RAMP, StridePolicy
+
+    control = load_control()
+    grace = control.stride.touchdown_grace
+    policy = StridePolicy(DeadbeatController(load_params(), control.deadbeat), control.stride)
+    policy.on_setpoint(0.39, 2.0)
+    decision = policy.on_apex(0.39, 2.0, 1)
+    policy.on_sensing(0.0)
+    policy.on_clock(5.0)
+    z = 0.205 * math.cos(decision.touchdown_angle) + 0.02
+    policy.on_pre_touchdown(0.2, z, -1.7, decision.touchdown_angle, 0.0)
+    before = policy.command(0.2)
+    assert before.mode == MODE_RAMP and before.clock_offset == 5.0
+    stood = 0.08
+    policy.on_drive_silence(False, stood)           # the driver counted the stand-still (1 ms off, say)
+    policy.on_clock(5.0 + stood - 0.001)           # and the stamps re-anchored by it
+    after = policy.command(0.25)
+    assert after.mode == MODE_RAMP and after.clock_offset == 5.0 + stood - 0.001
+    assert after.time == pytest.approx(before.time + stood - 0.001)
+    # the deadline: the predicted touchdown on the new mapping plus the grace, the stand-still not twice
+    assert policy.command(after.time + grace - 0.0005).mode == MODE_RAMP
+    assert policy.command(after.time + grace + 0.0015).mode != MODE_RAMP
+    # a touchdown measured on one mapping goes out on the next
+    policy.on_touchdown(0.3, "stamp")
+    assert policy.command(0.301).stamp == "stamp"
+    policy.on_clock(5.0 + stood + 0.03)
+    moved = policy.command(0.302)
+    assert moved.time == pytest.approx(0.3 + 0.031) and moved.stamp is None and moved.clock_offset == 5.0 + stood + 0.03
+
+
 def test_a_drive_fault_keeps_the_stance_torque_free_and_the_stride_goes_on_when_the_drive_is_back():
     """SAFE for a fault: no position hold through a stance (a large hip torque, which threw the robot
     backwards); once the drive is back before lift-off the stride goes on: positioned again, or its

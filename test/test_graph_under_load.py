@@ -17,6 +17,7 @@ from hopper_ros.control.deadbeat import DeadbeatController
 from hopper_ros.hardware.config import load_hardware
 from hopper_ros.harness.graph_lockstep import GraphLockstep
 from hopper_ros.physics.params import load_params
+from hopper_ros.sensing.samples import EventType
 from hopper_ros.sim.config import load_sim_config
 
 HARDWARE = load_hardware()
@@ -251,3 +252,38 @@ def test_a_drive_fault_while_hopping_costs_no_fall(after_apex):           # touc
             run.true_apexes[before - 1:]
     finally:
         graph.close()
+
+
+def pre_touchdowns_detected_at(stall_at=None, length=0.0):
+    """The instants (sample times) at which the pre-touchdown events were detected, in a run with the
+    simulated robot stopped for `length` from the sample at `stall_at` on (its world standing still)."""
+    seen = []
+
+    def hook(graph):
+        on_event = graph._on_event
+
+        def record(event, run):
+            if event.kind is EventType.PRE_TOUCHDOWN:
+                seen.append(event.detected_at)
+            on_event(event, run)
+        graph._on_event = record
+        if stall_at is not None:
+            graph.host_delay = lambda t: length if t >= stall_at - 1e-9 else 0.0
+
+    graph, run = run_graph(graph_hook=hook)
+    return graph, run, seen
+
+
+@pytest.mark.parametrize("length", [0.03, 0.08, 0.14])
+def test_a_stop_of_the_simulated_robot_just_before_its_pre_touchdown_event(length):
+    """The simulated robot stops at the very sample on which the pre-touchdown event would be detected:
+    the event comes on the first state after the stop. Stamped at once on the sensing clock as it stood
+    before (the estimator re-anchors on the second late packet), its predicted touchdown lay the stop's
+    length in the past and the controller cancelled the stance ramp (bench_demo_load round 3: 0.68 cm).
+    Now that first sample waits for the next one, which says the mapping it is on."""
+    _, _, unstopped = pre_touchdowns_detected_at()
+    stall_at = unstopped[2]                          # sample times are the stamps of an unloaded run
+    graph, run, stopped = pre_touchdowns_detected_at(stall_at, length)
+    assert stopped[2] == pytest.approx(stall_at + length, abs=1e-6)   # the event on the first state after the stop
+    assert_hops_as_unloaded(graph, run)
+    assert graph.policy.counters["touchdowns_missed"] == 0

@@ -144,6 +144,7 @@ state:
       nanosec: 0
     frame_id: ''
   sequence: 3
+  mcu_time: 0.0
   y: 1.25
   z: 0.4
   y_dot: 2.0

@@ -343,6 +343,36 @@ def test_the_ramp_gives_its_whole_impulse_wherever_the_touchdown_falls_between_t
     assert impulse == pytest.approx(_milliamps(-tau_0) * duration / 2, abs=len(seen) * SETTINGS.sync_period)
 
 
+def test_a_touchdown_stamped_after_a_stand_still_starts_its_ramp_at_its_stamp(rig):
+    """The robot stands still 100 ms (its drive answers none of the SYNCs: the simulated robot's process
+    stopped) before a touchdown predicted on the sensing clock as it stood before. The touchdown measured
+    after it is stamped on the clock re-anchored by the stand-still, and its command can come before the
+    drive's first answer (its hub sends what it held first): the driver, which could not tell that stamp
+    from one on the old clock, moved it by the whole stand-still, and that stance got no torque (bench
+    round 4: 1.4 m/s lost). The command's clock_offset, stepped by the stand-still, tells it."""
+    r = rig().start()
+    r.enable(torque=1.0)
+    tau_0, duration, stood = 6.0, 0.05, 0.1
+    predicted = r.clock.t + 0.015
+
+    def ramp(stamp, clock_offset, steps):
+        for _ in range(steps):
+            r.step(1, command=(MODE_RAMP, tau_0, duration, r.clock.t + 0.001 - stamp, clock_offset))
+
+    ramp(predicted, 0.0, 5)
+    r.drive_alive = False                                  # the robot stands still
+    ramp(predicted, 0.0, round(stood / SETTINGS.sync_period))
+    r.drive.discard_syncs(stood)
+    measured = r.clock.t + 0.001                           # just after it, on the re-anchored clock
+    ramp(measured, stood, 3)                               # heard before the drive's first answer
+    r.drive_alive = True
+    ramp(measured, stood, 60)
+    for t, _, values in r.rpdos:
+        if t > measured:
+            assert values[2] == pytest.approx(_ramp_milliamps(tau_0, duration, t - measured), abs=1)
+    assert r.driver.frozen_time >= stood - 2 * SETTINGS.sync_period     # the answers' count, moving nothing
+
+
 def test_command_watchdog_quick_stops_then_disables_and_recovers(rig):
     r = rig().start()
     r.enable()

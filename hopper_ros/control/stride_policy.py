@@ -71,6 +71,7 @@ class Command:
     duration: float = 0.0
     time: float = math.nan      # [s] the stamp: now, the touchdown or the predicted touchdown
     stamp: Any = None           # the caller's own stamp of that instant when it gave one
+    clock_offset: float = 0.0   # [s] the sensing clock's mapping the stamp is on (host minus robot time)
 
 
 class StridePolicy:
@@ -91,8 +92,10 @@ class StridePolicy:
         self.counters = {"strides": 0, "infeasible": 0, "faults": 0, "commands": 0, "touchdowns_missed": 0,
                          "sensing_lost": 0}
         self.events: list[tuple[str, str]] = []     # (logger level, text) for the caller's log
-        self._touchdown: tuple[float, Any] = (math.nan, None)
-        self._predicted_touchdown = math.nan
+        self._clock_offset = 0.0        # [s] the sensing clock's mapping (host minus robot time) of the last event
+        self._touchdown: tuple[float, Any, float] = (math.nan, None, 0.0)   # robot time, stamp, its mapping
+        self._predicted_touchdown = math.nan   # [s] robot time
+        self._offset_at_prediction = 0.0
         self._release_at = math.inf     # the pre-touchdown instant heard ahead: the leg let go then
         self._cancelled_ramp = False
         self._brake_since = math.nan
@@ -157,9 +160,9 @@ class StridePolicy:
         heard, 1 ms ahead, it sent the ramp late under a real-time load beside the loop: its torque
         reached the leg 5.4 ms after a touchdown)."""
         self._release_at = time
-        self._predicted_touchdown = time + self.time_to_touchdown(z, z_dot, leg_angle, leg_angle_rate) \
-            if self.settings.ramp_ahead else math.nan
-        self._frozen_at_prediction = self._frozen_time
+        self._predicted_touchdown = time - self._clock_offset + self.time_to_touchdown(
+            z, z_dot, leg_angle, leg_angle_rate) if self.settings.ramp_ahead else math.nan
+        self._frozen_at_prediction, self._offset_at_prediction = self._frozen_time, self._clock_offset
         self._cancelled_ramp = False
 
     def time_to_touchdown(self, z: float, z_dot: float, leg_angle: float, leg_angle_rate: float) -> float:
@@ -170,7 +173,17 @@ class StridePolicy:
     def on_touchdown(self, time: float, stamp: Any = None) -> None:
         self._release_at = math.inf
         self.machine.on_touchdown(time)
-        self._touchdown = (time, stamp)
+        self._touchdown = (time - self._clock_offset, stamp, self._clock_offset)
+
+    def on_clock(self, clock_offset: float) -> None:
+        """The sensing clock's mapping of the gait event that comes next (its state's stamp minus its
+        robot time). The ramp's instants are kept on the robot's clock and each command maps them with
+        the latest mapping: after the robot stood still the stamps re-anchor by that time, and a ramp
+        predicted before it follows (the driver, told by the step of `Command.clock_offset`, then moves
+        no ramp by its own count of the stand-still, 1-4 SYNCs off; nor a touchdown measured after it,
+        which it could not tell from one stamped on the old mapping)."""
+        if math.isfinite(clock_offset):
+            self._clock_offset = clock_offset
 
     def on_liftoff(self, leg_angle: float) -> None:
         self.machine.on_liftoff(leg_angle)
@@ -235,12 +248,13 @@ class StridePolicy:
             self.counters["sensing_lost"] += 1
             self.events.append(("error", f"no gait event for {s.sensing_timeout * 1e3:.0f} ms while hopping: "
                                          "sensing lost, drive disabled"))
+        offset = self._clock_offset
         if self.sensing_lost:
-            return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp)
+            return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp, offset)
         if self._acknowledge == math.inf:
             self._acknowledge = now + s.fault_acknowledge
         if now < self._acknowledge:
-            return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp)
+            return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp, offset)
         if machine.faulted:
             resumed = machine.resume()
             self.events.append(("info", "drive fault acknowledged: " + (
@@ -254,18 +268,23 @@ class StridePolicy:
         phase, plan = machine.phase, machine.plan
         if phase is Phase.STANCE and plan is not None:
             # the driver runs the ramp itself, from the touchdown time: jitter in the stream cannot shift it
-            return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, *self._touchdown)
+            touchdown, stamp, its_offset = self._touchdown
+            return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, touchdown + offset,
+                           stamp if its_offset == offset else None, offset)
         if phase is Phase.PRE_TOUCHDOWN and plan is not None and math.isfinite(self._predicted_touchdown):
-            deadline = self._predicted_touchdown + s.touchdown_grace + self._frozen_time - self._frozen_at_prediction
+            # the stand-still since the prediction: in the stamps once they re-anchored, else the driver's count
+            frozen = max(0.0, self._frozen_time - self._frozen_at_prediction - (offset - self._offset_at_prediction))
+            deadline = self._predicted_touchdown + offset + s.touchdown_grace + frozen
             if now <= deadline or self._drive_silent:
                 # scheduled ahead: zero current until the predicted touchdown, then the ramp
-                return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, self._predicted_touchdown)
+                return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, self._predicted_touchdown + offset,
+                               None, offset)
             if not self._cancelled_ramp:
                 self._cancelled_ramp = True
                 self.counters["touchdowns_missed"] += 1
                 self.events.append(("warning", f"no touchdown within {s.touchdown_grace * 1e3:.0f} ms of the "
                                                f"predicted one: stance ramp cancelled"))
-        return Command(mode, float(setpoint), 0.0, now, now_stamp)
+        return Command(mode, float(setpoint), 0.0, now, now_stamp, offset)
 
     def due(self, command: Command, now: float) -> bool:
         """Whether `command` goes out now: it changed, or `keep_alive` passed (half of it, so a

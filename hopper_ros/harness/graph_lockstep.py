@@ -123,7 +123,8 @@ class GraphLockstep:
         now = self.host_time
         command = self.policy.command(now)
         if self.policy.due(command, now):
-            self.driver.command(command.mode, command.setpoint, command.duration, now - command.time)
+            self.driver.command(command.mode, command.setpoint, command.duration, now - command.time,
+                                command.clock_offset)
         self.policy.drain_events()
 
     def _cycle(self, sync: bool = True) -> None:
@@ -139,6 +140,7 @@ class GraphLockstep:
     def _on_event(self, event, run: GraphRun) -> None:
         self.policy.on_sensing(self.host_time)
         state = event.state
+        self.policy.on_clock(state.stamp - state.mcu_time)
         if event.kind is EventType.APEX:
             run.apexes.append((event.time, state.z, state.y_dot))
             decision = self.policy.on_apex(state.z, state.y_dot, event.stride_index)

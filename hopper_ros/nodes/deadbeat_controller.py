@@ -141,6 +141,8 @@ class DeadbeatControllerNode(Node):
         when, s = to_seconds(msg.header.stamp), msg.state
         with self._lock:
             self.policy.on_sensing(now_seconds(self))
+            if s.mcu_time > 0.0:                # the state's robot time: the clock mapping its stamp is on
+                self.policy.on_clock(to_seconds(s.header.stamp) - s.mcu_time)
             if msg.type == GaitEvent.PRE_TOUCHDOWN:
                 self.policy.on_pre_touchdown(when, s.z, s.z_dot, s.leg_angle, s.leg_angle_rate)
             elif msg.type == GaitEvent.TOUCHDOWN:
@@ -213,6 +215,7 @@ class DeadbeatControllerNode(Node):
             msg = self._command
             msg.header.stamp = command.stamp if command.stamp is not None else to_stamp(command.time)
             msg.mode, msg.setpoint, msg.duration = command.mode, command.setpoint, command.duration
+            msg.clock_offset = command.clock_offset
             self._command_pub.publish(msg)
             published = time.monotonic()
             if self._published == self._published:

@@ -118,7 +118,7 @@ class MotorDriverNode(Node):
         if msg.mode == MotorCommand.MODE_RAMP:   # the ramp started at the stamp (touchdown), on the host clock
             age = now_seconds(self) - to_seconds(msg.header.stamp)
         with self._lock:
-            self._driver.command(msg.mode, msg.setpoint, msg.duration, age)
+            self._driver.command(msg.mode, msg.setpoint, msg.duration, age, msg.clock_offset)
 
     def _check_transport(self) -> None:
         """The bus's connection closed for good (the simulated robot's hub went away, killed): this node

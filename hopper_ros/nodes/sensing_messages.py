@@ -59,6 +59,7 @@ def fill_body_state(msg: BodyState, estimate: Estimate) -> BodyState:
     to_stamp(estimate.stamp, msg.header.stamp)
     msg.header.frame_id = "ground"
     msg.sequence = estimate.sequence
+    msg.mcu_time = estimate.mcu_time
     msg.y, msg.z, msg.y_dot, msg.z_dot = estimate.y, estimate.z, estimate.y_dot, estimate.z_dot
     msg.y_ddot, msg.z_ddot = estimate.y_ddot, estimate.z_ddot
     msg.leg_angle, msg.leg_angle_rate = estimate.leg_angle, estimate.leg_angle_rate
@@ -69,9 +70,9 @@ def fill_body_state(msg: BodyState, estimate: Estimate) -> BodyState:
 
 
 def estimate_from_msg(msg: BodyState) -> Estimate:
-    """The estimate a BodyState carries; mcu_time is not on the topic and set to the stamp."""
+    """The estimate a BodyState carries; a state without its robot time (mcu_time 0) gets the stamp."""
     stamp = to_seconds(msg.header.stamp)
-    return Estimate(msg.sequence, stamp, stamp, msg.y, msg.z, msg.y_dot, msg.z_dot, msg.y_ddot, msg.z_ddot,
+    return Estimate(msg.sequence, msg.mcu_time or stamp, stamp, msg.y, msg.z, msg.y_dot, msg.z_dot, msg.y_ddot, msg.z_ddot,
                     msg.leg_angle, msg.leg_angle_rate, tuple(msg.covariance_diagonal), msg.measurement_used,
                     msg.outlier_rejected)
 

@@ -47,7 +47,7 @@ from .sequence import StartupAndShutdown
 from .settings import (COUNTER_NAMES, ERROR, INFO, MODE_CURRENT, MODE_DISABLED, MODE_NAMES, MODE_POSITION, MODE_RAMP,
                        WARN, DriveConfig, DriverSettings)
 from .startup import RPDO_MAPPINGS, TPDO_MAPPINGS
-from .stillness import DriveStillness
+from .stillness import FROZEN_MIN, DriveStillness
 from .status import DriveStatus, Phase, connection_closed, first_line
 from .units import DriveUnits
 
@@ -119,6 +119,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         self.stillness = DriveStillness(settings.sync_period, now)   # when the robot stood still
         self._held = 0.0                    # [s] what the ramp moved by for the latest stand-still so far
         self._follows = False               # the ramp moves with the latest stand-still (it came after its stamp)
+        self._clock_offset: float | None = None   # [s] the sensing clock mapping of the latest command's stamp
         self._last_answer = now             # when the drive last answered a SYNC (its TPDOs complete)
         self._next_master_heartbeat = now
         self._nmt_start_sent_at = -math.inf
@@ -130,7 +131,8 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
 
     # ================================================================== public API
 
-    def command(self, mode: int, setpoint: float, duration: float = 0.0, age: float = 0.0) -> bool:
+    def command(self, mode: int, setpoint: float, duration: float = 0.0, age: float = 0.0,
+                clock_offset: float = 0.0) -> bool:
         """Take one motor command; False (counted, ignored) if it is invalid.
 
         MODE_RAMP: the stance ramp of (2.32), hip torque -setpoint (1 - t/duration) for t in
@@ -139,6 +141,11 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         1 kHz cycle computes the current of every period, so jitter in the command stream does
         not stretch or shift the ramp; repeats of the same ramp keep its start, and the same ramp
         under a stamp more than RAMP_RESTAMP away (the measured touchdown) moves to that stamp.
+
+        `clock_offset` [s]: the sensing clock's mapping the stamps are on (host minus robot time,
+        MotorCommand.clock_offset). When it steps by a stand-still's worth, the sensing clock has
+        re-anchored by the robot's stand-still: the stamps carry it from then on, and the time the
+        drive's answers said the robot stood still moves no ramp any more (`DriveStillness.reflect`).
         """
         now = self.clock()
         if mode == MODE_RAMP and not (math.isfinite(duration) and duration > 0.0 and math.isfinite(age)):
@@ -148,6 +155,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
             self._event(WARN, f"rejected motor command: mode {mode}, setpoint {setpoint!r}", key="rejected")
             return False
         self.counters["commands_received"] += 1
+        self._note_clock(clock_offset)
         if self._last_command is not None:
             self.command_gaps.add(now - self._last_command)
         self._last_command = now
@@ -368,6 +376,19 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         """[s] How long the robot stood still after the instant `stamp` (`DriveStillness.frozen_after`)."""
         return self.stillness.frozen_after(stamp, now)
 
+    def _note_clock(self, clock_offset: float) -> None:
+        """The commands' stamps re-anchored by a stand-still's worth (FROZEN_MIN or more): the robot's stand-still
+        is in the stamps now (a ramp's command on the new mapping moves it there), the answers' count of it
+        moves nothing."""
+        if not math.isfinite(clock_offset):
+            return
+        if self._clock_offset is not None and abs(clock_offset - self._clock_offset) >= FROZEN_MIN:
+            self.stillness.reflect()
+            self._held, self._follows = 0.0, False
+            self._event(INFO, f"the sensing clock re-anchored by {(clock_offset - self._clock_offset) * 1e3:.1f} ms "
+                              "(the robot stood still?): the stance ramp follows the stamps", key="reanchor")
+        self._clock_offset = clock_offset
+
     def _follow_stillness(self, now: float) -> None:
         """The ramp is the robot's: while it stands still the ramp waits (its start moves with the
         clock) instead of running out in a stance that is frozen, and one scheduled ahead of a
@@ -378,7 +399,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         settled = self.stillness.update(now)
         if self._ramp is None:
             self._follows, self._held = False, 0.0
-        elif self.stillness.silent:
+        elif self.stillness.silent and not self.stillness.reflected:
             self._follows = True                    # a ramp of this silence moves with it
         if settled is not None:
             target = settled if self._follows else 0.0

@@ -13,6 +13,10 @@ they come. So:
   the robot stood still (`update` returns it; fewer than FROZEN_MIN's worth are answers still in
   transit); `frozen_time` adds them up and `frozen_after(stamp)` maps an instant of the robot's onto
   the host clock.
+- `reflect()`: the sensing clock has re-anchored by the latest stand-still (the commands' stamps are on
+  the robot's clock as it now stands): no time counted so far moves a stamp any more (`frozen_time` still
+  adds it up). The answers tell a stand-still to within 1-4 SYNCs (a stopped process's hub sends the
+  answers it held first); the re-anchored stamps carry it to within the sensing clock's bound.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ class DriveStillness:
         self._floor: int | None = None            # SYNCs known never to be answered (start-up, standing still)
         self._silences: list[tuple[float, float]] = []   # (when it ended, how long it stood still)
         self._ended = now                         # the first answer after the last silence
+        self.reflected = False                    # the latest stand-still is in the sensing clock's stamps
 
     @property
     def silent(self) -> bool:
@@ -49,8 +54,9 @@ class DriveStillness:
         self._last_answer = now
 
     def standing_still(self, now: float) -> float:
-        """[s] The present silence, once it is long enough to be the robot standing still."""
-        if self._silence_began is not None and now - self._silence_began > FROZEN_AFTER:
+        """[s] The present silence, once it is long enough to be the robot standing still (and is not yet
+        in the sensing clock's stamps)."""
+        if self._silence_began is not None and not self.reflected and now - self._silence_began > FROZEN_AFTER:
             return now - self._silence_began
         return 0.0
 
@@ -58,7 +64,7 @@ class DriveStillness:
         """[s] The latest stand-still not yet settled, if it ended after `stamp`: the present silence's
         (`standing_still`), or that of a silence whose answers are still coming in (as far as they
         tell so far)."""
-        if self._least_unanswered is not None and stamp < self._ended:
+        if self._least_unanswered is not None and stamp < self._ended and not self.reflected:
             frozen = max(0, self._least_unanswered - self._floor) * self.sync_period
             return frozen if frozen >= FROZEN_MIN else 0.0
         return self.standing_still(now)
@@ -66,7 +72,7 @@ class DriveStillness:
     def covers(self, stamp: float) -> bool:
         """Whether the latest stand-still, not yet settled, came after the instant `stamp` (so that a
         ramp from that stamp moves by it)."""
-        return self.silent or (self._least_unanswered is not None and stamp < self._ended)
+        return not self.reflected and (self.silent or (self._least_unanswered is not None and stamp < self._ended))
 
     def frozen_after(self, stamp: float, now: float) -> float:
         """[s] How long the robot stood still after the instant `stamp` (times that ended after it, and
@@ -75,6 +81,12 @@ class DriveStillness:
         the robot's clock as it stood before (the sensing clock re-anchors only after it) and lies
         that whole time early."""
         return sum(frozen for ended, frozen in self._silences if ended > stamp) + self.pending(now, stamp)
+
+    def reflect(self) -> None:
+        """The sensing clock re-anchored by the latest stand-still (`reflected`, until the next silence):
+        the stamps are on the robot's clock as it now stands, so no stand-still so far moves them."""
+        self.reflected = True
+        self._silences = []
 
     def update(self, now: float) -> float | None:
         """Once a SYNC period, before its SYNC: the time [s] the robot stood still in a silence whose
@@ -87,7 +99,7 @@ class DriveStillness:
         quiet = now - self._last_answer > SILENT_PERIODS * self.sync_period
         if quiet and self._silence_began is None:
             result = self._settle() if self._least_unanswered is not None else None
-            self._silence_began = self._last_answer
+            self._silence_began, self.reflected = self._last_answer, False
             return result
         if quiet:
             return None
@@ -110,5 +122,7 @@ class DriveStillness:
             return 0.0
         self._floor += excess
         self.frozen_time += frozen
+        if self.reflected:          # in the stamps already: it moves nothing
+            return 0.0
         self._silences = [*self._silences[1 - SILENCES_KEPT:], (self._ended, frozen)]
         return frozen
