@@ -8,6 +8,8 @@ the setpoint by centimetres); the figures of the real graph under load are the b
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from hopper_ros.canbus.driver import load_motor_driver
@@ -18,6 +20,7 @@ from hopper_ros.hardware.config import load_hardware
 from hopper_ros.harness.graph_lockstep import GraphLockstep
 from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.samples import EventType
+from hopper_ros.sim.plant import ZDOT
 from hopper_ros.sim.config import load_sim_config
 
 HARDWARE = load_hardware()
@@ -285,5 +288,40 @@ def test_a_stop_of_the_simulated_robot_just_before_its_pre_touchdown_event(lengt
     stall_at = unstopped[2]                          # sample times are the stamps of an unloaded run
     graph, run, stopped = pre_touchdowns_detected_at(stall_at, length)
     assert stopped[2] == pytest.approx(stall_at + length, abs=1e-6)   # the event on the first state after the stop
+    assert_hops_as_unloaded(graph, run)
+    assert graph.policy.counters["touchdowns_missed"] == 0
+
+
+def stop_before_a_touchdown(lead, length, which=3):
+    """The graph with the simulated robot stopped for `length` from `lead` before its `which`-th touchdown
+    (the time to it from the plant's flight, leg held), its world standing still."""
+    stop = {"at": None, "touchdowns": 0, "contact": False}
+
+    def hook(graph):
+        def host_delay(t):
+            plant = graph.robot.plant
+            contact = plant.in_contact
+            stop["touchdowns"] += contact and not stop["contact"]
+            stop["contact"] = contact
+            if stop["at"] is None and stop["touchdowns"] == which - 1 and not contact and plant.state[ZDOT] < 0:
+                height, speed, gravity = plant.toe_height, plant.state[ZDOT], plant.gravity
+                if (speed + math.sqrt(speed * speed + 2.0 * gravity * height)) / gravity <= lead:
+                    stop["at"] = t
+            return 0.0 if stop["at"] is None or t < stop["at"] else length
+        graph.host_delay = host_delay
+
+    graph, run = run_graph(graph_hook=hook)
+    assert stop["at"] is not None
+    return graph, run
+
+
+@pytest.mark.parametrize("lead", [0.001, 0.002, 0.005])
+def test_a_stop_of_the_simulated_robot_just_before_a_touchdown(lead):
+    """Stopped 120 ms a few ms before a touchdown: the touchdown is measured right after the stop, on the
+    sensing clock re-anchored by it, while the driver still holds the ramp predicted on the old one by
+    its own count of the stop. It took the measured stamp for one of the old clock and moved it by the
+    whole stop: the stance had no torque, the apex 7.8 and 12.2 cm off (stopped 1 and 2 ms before).
+    `MotorCommand.clock_offset` now tells it which clock the stamp is on."""
+    graph, run = stop_before_a_touchdown(lead, 0.12)
     assert_hops_as_unloaded(graph, run)
     assert graph.policy.counters["touchdowns_missed"] == 0

@@ -71,7 +71,8 @@ class Command:
     duration: float = 0.0
     time: float = math.nan      # [s] the stamp: now, the touchdown or the predicted touchdown
     stamp: Any = None           # the caller's own stamp of that instant when it gave one
-    clock_offset: float = 0.0   # [s] the sensing clock's mapping the stamp is on (host minus robot time)
+    clock_offset: float = math.nan   # [s] the sensing clock's mapping the stamp is on (host minus robot
+                                     #   time; nan: no event has told it yet)
 
 
 class StridePolicy:
@@ -92,7 +93,7 @@ class StridePolicy:
         self.counters = {"strides": 0, "infeasible": 0, "faults": 0, "commands": 0, "touchdowns_missed": 0,
                          "sensing_lost": 0}
         self.events: list[tuple[str, str]] = []     # (logger level, text) for the caller's log
-        self._clock_offset = 0.0        # [s] the sensing clock's mapping (host minus robot time) of the last event
+        self._clock_offset = math.nan   # [s] the sensing clock's mapping (host minus robot time) of the last event
         self._touchdown: tuple[float, Any, float] = (math.nan, None, 0.0)   # robot time, stamp, its mapping
         self._predicted_touchdown = math.nan   # [s] robot time
         self._offset_at_prediction = 0.0
@@ -160,9 +161,9 @@ class StridePolicy:
         heard, 1 ms ahead, it sent the ramp late under a real-time load beside the loop: its torque
         reached the leg 5.4 ms after a touchdown)."""
         self._release_at = time
-        self._predicted_touchdown = time - self._clock_offset + self.time_to_touchdown(
+        self._predicted_touchdown = time - self._mapping + self.time_to_touchdown(
             z, z_dot, leg_angle, leg_angle_rate) if self.settings.ramp_ahead else math.nan
-        self._frozen_at_prediction, self._offset_at_prediction = self._frozen_time, self._clock_offset
+        self._frozen_at_prediction, self._offset_at_prediction = self._frozen_time, self._mapping
         self._cancelled_ramp = False
 
     def time_to_touchdown(self, z: float, z_dot: float, leg_angle: float, leg_angle_rate: float) -> float:
@@ -173,7 +174,7 @@ class StridePolicy:
     def on_touchdown(self, time: float, stamp: Any = None) -> None:
         self._release_at = math.inf
         self.machine.on_touchdown(time)
-        self._touchdown = (time - self._clock_offset, stamp, self._clock_offset)
+        self._touchdown = (time - self._mapping, stamp, self._mapping)
 
     def on_clock(self, clock_offset: float) -> None:
         """The sensing clock's mapping of the gait event that comes next (its state's stamp minus its
@@ -184,6 +185,11 @@ class StridePolicy:
         which it could not tell from one stamped on the old mapping)."""
         if math.isfinite(clock_offset):
             self._clock_offset = clock_offset
+
+    @property
+    def _mapping(self) -> float:
+        """[s] The mapping the policy's instants are converted with (0 while no event has told it)."""
+        return self._clock_offset if math.isfinite(self._clock_offset) else 0.0
 
     def on_liftoff(self, leg_angle: float) -> None:
         self.machine.on_liftoff(leg_angle)
@@ -248,7 +254,7 @@ class StridePolicy:
             self.counters["sensing_lost"] += 1
             self.events.append(("error", f"no gait event for {s.sensing_timeout * 1e3:.0f} ms while hopping: "
                                          "sensing lost, drive disabled"))
-        offset = self._clock_offset
+        offset, mapping = self._clock_offset, self._mapping
         if self.sensing_lost:
             return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp, offset)
         if self._acknowledge == math.inf:
@@ -269,15 +275,15 @@ class StridePolicy:
         if phase is Phase.STANCE and plan is not None:
             # the driver runs the ramp itself, from the touchdown time: jitter in the stream cannot shift it
             touchdown, stamp, its_offset = self._touchdown
-            return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, touchdown + offset,
-                           stamp if its_offset == offset else None, offset)
+            return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, touchdown + mapping,
+                           stamp if its_offset == mapping else None, offset)
         if phase is Phase.PRE_TOUCHDOWN and plan is not None and math.isfinite(self._predicted_touchdown):
             # the stand-still since the prediction: in the stamps once they re-anchored, else the driver's count
-            frozen = max(0.0, self._frozen_time - self._frozen_at_prediction - (offset - self._offset_at_prediction))
-            deadline = self._predicted_touchdown + offset + s.touchdown_grace + frozen
+            frozen = max(0.0, self._frozen_time - self._frozen_at_prediction - (mapping - self._offset_at_prediction))
+            deadline = self._predicted_touchdown + mapping + s.touchdown_grace + frozen
             if now <= deadline or self._drive_silent:
                 # scheduled ahead: zero current until the predicted touchdown, then the ramp
-                return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, self._predicted_touchdown + offset,
+                return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, self._predicted_touchdown + mapping,
                                None, offset)
             if not self._cancelled_ramp:
                 self._cancelled_ramp = True

@@ -174,7 +174,8 @@ class ClockOffset:
 
 
 class StateEstimator:
-    """`update(measurement)` -> the estimates it produces (predictions across a gap, then the update)."""
+    """`update(measurement)` -> the estimates it produces (predictions across a gap, then the update; a
+    sample held for its clock mapping comes out with the next one)."""
 
     def __init__(self, settings: EstimatorSettings, kinematics: BoomKinematics, sample_period: float) -> None:
         self.settings = settings

@@ -359,8 +359,11 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
 
     @property
     def silent(self) -> bool:
-        """The drive answers no SYNC (stillness.SILENT_PERIODS): the robot may be standing still."""
-        return self.stillness.silent
+        """The drive answers no SYNC (stillness.SILENT_PERIODS), or did until its count settled: the robot
+        may be standing still, for a time not known yet. Until the count, the first answers after a stop
+        (the ones the hub held) make a stand-still look short: the controller, told the silence was over
+        but not yet how long, cancelled a ramp whose touchdown the stand-still had put off (bench round 5)."""
+        return self.stillness.silent or self.stillness.settling
 
     @property
     def frozen_time(self) -> float:

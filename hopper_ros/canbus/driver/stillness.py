@@ -49,6 +49,11 @@ class DriveStillness:
     def silent(self) -> bool:
         return self._silence_began is not None
 
+    @property
+    def settling(self) -> bool:
+        """A silence ended and its late answers may still be coming: its count is not known yet."""
+        return self._least_unanswered is not None
+
     def on_answer(self, now: float) -> None:
         self.answered += 1
         self._last_answer = now
