@@ -163,9 +163,6 @@ class SocketcandServer:
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)          # a full pipe means a wake-up is pending anyway
         self._wake_pending = threading.Event()
-        self._turns = 0                          # turns of the socket thread, and whether the last read a frame
-        self._last_turn_read = True
-        self._turn_done = threading.Condition()
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -231,29 +228,12 @@ class SocketcandServer:
         except OSError:                       # full (a wake-up is pending) or closed
             pass
 
-    def drain(self, timeout: float) -> bool:
-        """Wait at most `timeout` [s] until the socket thread has read all its clients had sent (a turn that
-        read nothing, after a wake-up). After a stop of this process (SIGSTOP) the frames of that time then
-        reach the in-process side at once, before its world goes on, instead of over its first milliseconds
-        (a drive taking the RPDOs of a stop while the robot moves again). False if the time ran out."""
-        deadline = time.monotonic() + timeout
-        with self._turn_done:
-            first = self._turns + 2
-            self._wake()
-            while self._turns < first or self._last_turn_read:
-                left = deadline - time.monotonic()
-                if left <= 0.0 or self._stop.is_set():
-                    return False
-                self._turn_done.wait(left)
-        return True
-
     def _serve_sockets(self) -> None:
         selector = selectors.DefaultSelector()
         selector.register(self._listener, selectors.EVENT_READ, "listen")
         selector.register(self._wake_r, selectors.EVENT_READ, "wake")
         try:
             while not self._stop.is_set():
-                read = False
                 for key, events in selector.select(_SELECT_TIMEOUT):
                     if key.data == "listen":
                         self._accept(selector)
@@ -269,12 +249,8 @@ class SocketcandServer:
                         if events & selectors.EVENT_WRITE:
                             client.writable = True
                         if events & selectors.EVENT_READ:
-                            read = True
                             self._read(client)
                 self._flush(selector)
-                with self._turn_done:
-                    self._turns, self._last_turn_read = self._turns + 1, read
-                    self._turn_done.notify_all()
         except Exception:                                     # keep close() working
             log.exception("socketcand hub: socket thread failed")
         finally:

@@ -23,7 +23,6 @@ from .experiment import ExperimentSeries
 from .robot import SimRobot, SimSample
 
 MODES = ("realtime", "lockstep")
-HUB_DRAIN_TIMEOUT = 0.005  # [s] after a stop, the longest wait for the CAN hub to read the frames of that time
 RESYNC_AFTER = 0.02        # [s] further behind than this, real-time mode does not catch up: the time missed is
                            #   skipped, the robot's world was frozen, and the drive answers none of the SYNCs
                            #   that came meanwhile (the motor driver counts them as the time the robot stood
@@ -125,8 +124,6 @@ class SimRunner:
             if realtime:
                 late = time.monotonic() - deadline
                 if late > RESYNC_AFTER:                    # the time missed is skipped: the robot was frozen
-                    if self.hub is not None:               # the frames of the stop reach the drive before
-                        self.hub.drain(HUB_DRAIN_TIMEOUT)  #   the world goes on, all at once (the last wins)
                     deadline = time.monotonic()
                     self.counters["resyncs"] += 1
                     if self.drive is not None:
