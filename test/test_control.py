@@ -154,7 +154,8 @@ def test_the_ramps_instants_follow_the_sensing_clock_when_it_re_anchors():
     the sensing clock re-anchors by that time, and the next event's state says so (its stamp minus its
     robot time). The ramp predicted before is kept on the robot's clock and goes out on the new mapping
     with it (`clock_offset`: the driver's cue), and so is a touchdown measured before the step; the
-    missed-touchdown deadline counts the stand-still once, in the stamps or in the driver's count."""
+    missed-touchdown deadline counts the stand-still once, in the stamps or in the driver's count; a step of
+    the mapping smaller than `stand_still_step` moves nothing."""
     from hopper_ros.control.stride_policy import MODE_RAMP, StridePolicy
 
     control = load_control()
@@ -183,6 +184,9 @@ def test_the_ramps_instants_follow_the_sensing_clock_when_it_re_anchors():
     policy.on_clock(5.0 + stood + 0.03)
     moved = policy.command(0.302)
     assert moved.time == pytest.approx(0.3 + 0.031) and moved.stamp is None and moved.clock_offset == 5.0 + stood + 0.03
+    # a re-anchor of a few ms (late packets under load, not a stand-still) leaves the ramp where it is
+    policy.on_clock(5.0 + stood + 0.032)
+    assert policy.command(0.303).time == pytest.approx(0.3 + 0.031)
 
 
 def test_a_drive_fault_keeps_the_stance_torque_free_and_the_stride_goes_on_when_the_drive_is_back():

@@ -373,6 +373,26 @@ def test_a_touchdown_stamped_after_a_stand_still_starts_its_ramp_at_its_stamp(ri
     assert r.driver.frozen_time >= stood - 2 * SETTINGS.sync_period     # the answers' count, moving nothing
 
 
+def test_the_drive_counts_as_silent_until_its_count_of_a_stand_still_has_settled(rig):
+    """`silent` (the controller's cue to cancel no ramp) lasts until the SYNCs never answered are counted:
+    the first answers after a stop are the ones the hub held, and the count they give at once is short.
+    Told the silence was over but not yet how long, the controller cancelled a ramp whose touchdown the
+    stand-still had put off (bench round 5: 0.70 cm)."""
+    from hopper_ros.canbus.driver.stillness import SETTLE
+
+    r = rig().start()
+    r.enable(torque=1.0)
+    r.drive_alive = False
+    r.step(60, command=(MODE_CURRENT, 0.5))
+    assert r.driver.silent
+    r.drive.discard_syncs(0.06)
+    r.drive_alive = True
+    r.step(2, command=(MODE_CURRENT, 0.5))
+    assert r.driver.stillness.answered and not r.driver.stillness.silent and r.driver.silent   # answers, count open
+    r.step(round(SETTLE / SETTINGS.sync_period) + 2, command=(MODE_CURRENT, 0.5))
+    assert not r.driver.silent and r.driver.frozen_time == pytest.approx(0.06, abs=2 * SETTINGS.sync_period)
+
+
 def test_command_watchdog_quick_stops_then_disables_and_recovers(rig):
     r = rig().start()
     r.enable()

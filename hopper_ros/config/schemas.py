@@ -277,6 +277,7 @@ class Deadbeat(Section):
 class Stride(Section):
     ramp_ahead: bool = False
     touchdown_grace: float = unit("s", 0.02, gt=0)
+    stand_still_step: float = unit("s", 0.01, gt=0)
     keep_alive: float = unit("s", 0.003, gt=0, le=0.1)
     executor_timeout: float = unit("s", 0.02, gt=0)
     sensing_timeout: float = unit("s", 0.5, gt=0)

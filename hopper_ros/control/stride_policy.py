@@ -48,6 +48,7 @@ class StrideSettings:
 
     ramp_ahead: bool = False            # send the ramp at pre-touchdown, stamped with the predicted touchdown
     touchdown_grace: float = 0.02       # [s] no touchdown this long after the predicted one: ramp cancelled
+    stand_still_step: float = 0.01      # [s] a step of the sensing clock's mapping this large: the robot stood still
     keep_alive: float = 0.003           # [s] an unchanged command is repeated this often
     executor_timeout: float = 0.02      # [s] the node's executor silent this long: its repeats stop (stale state)
     sensing_timeout: float = 0.5        # [s] no gait event this long while hopping: sensing lost, drive disabled
@@ -94,8 +95,10 @@ class StridePolicy:
                          "sensing_lost": 0}
         self.events: list[tuple[str, str]] = []     # (logger level, text) for the caller's log
         self._clock_offset = math.nan   # [s] the sensing clock's mapping (host minus robot time) of the last event
-        self._touchdown: tuple[float, Any, float] = (math.nan, None, 0.0)   # robot time, stamp, its mapping
-        self._predicted_touchdown = math.nan   # [s] robot time
+        self._stood_still = 0.0         # [s] its steps of a stand-still's size so far (`stand_still_step`)
+        # the ramp's instants on the robot's clock (host time less the stand-stills in the stamps so far)
+        self._touchdown: tuple[float, Any, float] = (math.nan, None, 0.0)   # that time, stamp, its mapping
+        self._predicted_touchdown = math.nan
         self._offset_at_prediction = 0.0
         self._release_at = math.inf     # the pre-touchdown instant heard ahead: the leg let go then
         self._cancelled_ramp = False
@@ -182,14 +185,20 @@ class StridePolicy:
         the latest mapping: after the robot stood still the stamps re-anchor by that time, and a ramp
         predicted before it follows (the driver, told by the step of `Command.clock_offset`, then moves
         no ramp by its own count of the stand-still, 1-4 SYNCs off; nor a touchdown measured after it,
-        which it could not tell from one stamped on the old mapping)."""
-        if math.isfinite(clock_offset):
-            self._clock_offset = clock_offset
+        which it could not tell from one stamped on the old mapping). Only steps of a stand-still's size
+        count (`stand_still_step`): a re-anchor of a few ms under load would move a running ramp, repeating
+        or skipping a part of it."""
+        if not math.isfinite(clock_offset):
+            return
+        step = clock_offset - self._clock_offset
+        if abs(step) >= self.settings.stand_still_step:       # False while unknown (nan)
+            self._stood_still += step
+        self._clock_offset = clock_offset
 
     @property
     def _mapping(self) -> float:
-        """[s] The mapping the policy's instants are converted with (0 while no event has told it)."""
-        return self._clock_offset if math.isfinite(self._clock_offset) else 0.0
+        """[s] Host minus robot time for the policy's instants: the stand-stills in the stamps so far."""
+        return self._stood_still
 
     def on_liftoff(self, leg_angle: float) -> None:
         self.machine.on_liftoff(leg_angle)

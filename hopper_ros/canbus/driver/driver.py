@@ -132,7 +132,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
     # ================================================================== public API
 
     def command(self, mode: int, setpoint: float, duration: float = 0.0, age: float = 0.0,
-                clock_offset: float = 0.0) -> bool:
+                clock_offset: float = math.nan) -> bool:
         """Take one motor command; False (counted, ignored) if it is invalid.
 
         MODE_RAMP: the stance ramp of (2.32), hip torque -setpoint (1 - t/duration) for t in
