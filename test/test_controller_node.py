@@ -22,6 +22,8 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+    from std_msgs.msg import Float64
+
     from hopper_ros.msg import ApexState, GaitEvent, MotorCommand, StrideCommand
     from hopper_ros.physics.flight import touchdown_time
     from hopper_ros.physics.params import load_params
@@ -35,6 +37,7 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
     setpoint = node.create_publisher(ApexState, "apex_setpoint", latched)
     apex = node.create_publisher(ApexState, "apex", 10)
     events = node.create_publisher(GaitEvent, "gait_event", 10)
+    clock = node.create_publisher(Float64, "clock_offset", 10)
     commands, strides = [], []
     best_effort = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
     node.create_subscription(MotorCommand, "motor_command", commands.append, best_effort)
@@ -57,7 +60,7 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
     try:
         assert spin_until(executor, lambda: apex.get_subscription_count()
                           and events.get_subscription_count() and setpoint.get_subscription_count()
-                          and node.count_publishers("motor_command"))
+                          and clock.get_subscription_count() and node.count_publishers("motor_command"))
         idle = tick()
         assert idle.mode == MotorCommand.MODE_DISABLED                # nothing to do without a setpoint
         setpoint.publish(ApexState(apex_height=0.39, forward_speed=2.0))
@@ -88,11 +91,19 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         assert (ahead.mode, ahead.setpoint) == (MotorCommand.MODE_RAMP, pytest.approx(decision.tau_0))
         assert ahead.header.stamp.sec + ahead.header.stamp.nanosec * 1e-9 == pytest.approx(expected, abs=1e-6)
         assert soon < expected < soon + 0.01
+        # the sensing clock re-anchors by an 80 ms stand-still (state_estimator's clock_offset): the ramp
+        # predicted on the robot's clock follows at once, and the command says which mapping it is on
+        clock.publish(Float64(data=5.0))
+        spin_until(executor, lambda: False, timeout=0.1)
+        clock.publish(Float64(data=5.08))
+        moved = tick(after=ahead)
+        assert moved.mode == MotorCommand.MODE_RAMP and moved.clock_offset == 5.08
+        assert moved.header.stamp.sec + moved.header.stamp.nanosec * 1e-9 == pytest.approx(expected + 0.08, abs=1e-6)
         touchdown = GaitEvent(type=GaitEvent.TOUCHDOWN)
         touchdown.header.stamp = stamp(soon + 0.01)
         events.publish(touchdown)
         spin_until(executor, lambda: False, timeout=0.2)
-        ramp = tick(after=ahead)          # the driver runs the ramp, from the touchdown's stamp
+        ramp = tick(after=moved)          # the driver runs the ramp, from the touchdown's stamp
         assert (ramp.mode, ramp.setpoint, ramp.duration) == (
             MotorCommand.MODE_RAMP, pytest.approx(decision.tau_0), pytest.approx(decision.predicted_liftoff_time))
         assert (ramp.header.stamp.sec, ramp.header.stamp.nanosec) == (touchdown.header.stamp.sec,

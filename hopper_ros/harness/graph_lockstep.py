@@ -112,7 +112,10 @@ class GraphLockstep:
             else:                                        # a shorter stall is caught up, a SYNC period a step
                 self._catching_up = True
         self.host_time = arrival
+        anchors = self.sensing.estimator.clock.anchors
         output = self.sensing.process(packet_format.encode(sample.packet), self.host_time)
+        if self.sensing.estimator.clock.anchors != anchors:     # the estimator node's clock_offset topic
+            self.policy.on_clock(self.sensing.estimator.clock.offset)
         self._events_in_transit += [(self.host_time + self.event_delay(event.time), event) for event in output.events]
         while self._events_in_transit and self._events_in_transit[0][0] <= self.host_time:
             self._on_event(self._events_in_transit.pop(0)[1], run)

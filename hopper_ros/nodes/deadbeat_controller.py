@@ -45,6 +45,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64
 
 from hopper_ros.config.schemas import load_model
 from hopper_ros.control.config import load_control
@@ -102,6 +103,7 @@ class DeadbeatControllerNode(Node):
         self.create_subscription(ApexState, "apex_setpoint", self._on_setpoint, SETPOINT_QOS)
         self.create_subscription(ApexState, "apex", self._on_apex, 10)
         self.create_subscription(GaitEvent, "gait_event", self._on_event, 10)
+        self.create_subscription(Float64, "clock_offset", self._on_clock, 10)
         self.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diagnostics, 10)
         self.create_timer(1.0, self._report)
         self._command = MotorCommand()
@@ -135,6 +137,12 @@ class DeadbeatControllerNode(Node):
             decision = self.policy.on_apex(msg.apex_height, msg.forward_speed, msg.stride_index)
             if decision is not None:
                 self._publish_decision(decision)
+            self._send()
+
+    def _on_clock(self, msg: Float64) -> None:
+        """The sensing clock re-anchored (state_estimator): a ramp scheduled on the robot's clock follows."""
+        with self._lock:
+            self.policy.on_clock(msg.data)
             self._send()
 
     def _on_event(self, msg: GaitEvent) -> None:

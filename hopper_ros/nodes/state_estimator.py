@@ -3,7 +3,9 @@
 Subscribes `body_measurement` (BodyMeasurement, from encoder_bridge); for each sample publishes
 `body_state` (BodyState): y, z and their velocities and accelerations (constant-acceleration
 filters, A.1.1), the leg angle and its rate, the covariance diagonal, stamped with the sample's
-instant on the host clock. Samples missing from the stream are bridged by predictions (one
+instant on the host clock. `clock_offset` (std_msgs/Float64, [s], host minus microcontroller time)
+each time that mapping re-anchors (the simulated robot stood still: the controller's ramp follows at
+once, not at the next gait event). Samples missing from the stream are bridged by predictions (one
 BodyState per missing sample, `measurement_used` false, dt from the microcontroller clock); a
 sample whose innovation fails the Mahalanobis gate is not used (`outlier_rejected`).
 `/diagnostics` (DiagnosticArray, every `diagnostics_period`): counters (measurements,
@@ -25,6 +27,7 @@ import math
 import time
 
 from rclpy.node import Node
+from std_msgs.msg import Float64
 
 from hopper_ros.hardware.config import load_hardware
 from hopper_ros.msg import BodyMeasurement, BodyState
@@ -49,6 +52,8 @@ class StateEstimatorNode(Node):
         self._state_msg = BodyState()
         qos = sample_qos(config.queue_depth)
         self._states = self.create_publisher(BodyState, "body_state", qos)
+        self._clock = self.create_publisher(Float64, "clock_offset", 10)
+        self._anchors = 0
         self._diagnostics = DiagnosticsReporter(self)
         self.create_subscription(BodyMeasurement, "body_measurement", self._on_measurement, qos)
         self.create_timer(period, self._report)
@@ -67,6 +72,10 @@ class StateEstimatorNode(Node):
         for estimate in self.estimator.update(measurement_from_msg(msg)):
             self._states.publish(fill_body_state(state_msg, estimate))
             self._last_z_dot_std = estimate.z_dot_std
+        clock = self.estimator.clock
+        if clock.anchors != self._anchors:
+            self._anchors = clock.anchors
+            self._clock.publish(Float64(data=clock.offset))
         elapsed = time.perf_counter() - started
         if elapsed > self._process_time_max:
             self._process_time_max = elapsed
