@@ -52,7 +52,7 @@ class StateEstimatorNode(Node):
         self._state_msg = BodyState()
         qos = sample_qos(config.queue_depth)
         self._states = self.create_publisher(BodyState, "body_state", qos)
-        self._clock = self.create_publisher(Float64, "clock_offset", 10)
+        self._clock_offset = self.create_publisher(Float64, "clock_offset", 10)
         self._anchors = 0
         self._diagnostics = DiagnosticsReporter(self)
         self.create_subscription(BodyMeasurement, "body_measurement", self._on_measurement, qos)
@@ -75,7 +75,7 @@ class StateEstimatorNode(Node):
         clock = self.estimator.clock
         if clock.anchors != self._anchors:
             self._anchors = clock.anchors
-            self._clock.publish(Float64(data=clock.offset))
+            self._clock_offset.publish(Float64(data=clock.offset))
         elapsed = time.perf_counter() - started
         if elapsed > self._process_time_max:
             self._process_time_max = elapsed
