@@ -14,8 +14,11 @@ Single stride (`experiment:=single_stride`, with `tau_0` and `touchdown_angle`):
 data collection; the ramp ends at the model's predicted lift-off for the apex the robot is
 thrown to; after the second apex the leg is held and then the drive disabled.
 
-Stance ramp timing (control.yaml `stride`, beyond the thesis: `ramp_ahead`, `touchdown_grace`): see
-hopper_ros/control/stride_policy.py.
+Stance ramp timing (control.yaml `stride`, beyond the thesis: `ramp_ahead`, `touchdown_grace`,
+`stand_still_step`): see hopper_ros/control/stride_policy.py. The ramp's instants are kept on the
+robot's clock: each gait event's state (stamp minus `mcu_time`) and `clock_offset` (std_msgs/Float64,
+from state_estimator, each time its clock mapping re-anchors) give the mapping, and MotorCommand's
+`clock_offset` says which one a command's stamp is on.
 
 A MotorCommand goes out at once when an input changes it (apex, gait event, setpoint, fault) and
 is repeated every `keep_alive` otherwise, which feeds the motor driver's watchdog: from a thread
