@@ -26,6 +26,8 @@ CASES = {
     "clean+leg_inertia": ("mj_clean", {"m_body": 2.00, "m_leg": 0.20, "i_leg": 2.4e-4}, {}),
     "clean+rotor": ("mj_clean", {"hip_armature": 8.5e-6 * 26 ** 2}, {}),
     "clean+viscous": ("mj_clean", {"hip_damping": 1e-4 * 26 ** 2}, {}),
+    "clean+rotor,friction_3": ("mj_clean", {"hip_armature": 8.5e-6 * 26 ** 2, "friction": 3.0}, {}),
+    "clean,friction_3": ("mj_clean", {"friction": 3.0}, {}),
     "clean+rotor+viscous": ("mj_clean", {"hip_armature": 8.5e-6 * 26 ** 2, "hip_damping": 1e-4 * 26 ** 2}, {}),
     "clean+contact_2ms": ("mj_clean", {"contact_solref": (0.002, 1.0)}, {}),
     "clean+toe_4mm": ("mj_clean", {"r_toe": 0.004}, {}),
