@@ -33,6 +33,9 @@ SENSOR_FAULTS = {"z_delay": 0.004, "y_delay": 0.004, "theta_delay": 0.004, "z_sc
 PAIRS = (("quadratic_drag", "torque_gain"), ("touchdown_loss_along", "hip_viscous_friction"),
          ("effective_gravity", "actuation_delay"), ("liftoff_collision", "spring_cubic"))
 STRIDES = 50
+# entries added to the library after the cases' seeds (100 + the place in `cases`) were fixed: listed last, so that
+# every earlier case keeps its recording
+LATER = ("rotor_inertia",)
 LOCATED = {"flight": ["flight_horizontal", "flight_vertical"],
            "touchdown": ["touchdown_along", "touchdown_across", "touchdown_timing"],
            "stance_leg": ["stance_along", "stance_hip"], "stance_hip": ["stance_hip"], "actuator": ["stance_hip"],
@@ -43,11 +46,14 @@ def cases() -> dict:
     """name -> list of effect names (physics effects at sim.yaml's magnitudes, sensor faults above)."""
     out = {"clean_a": [], "clean_b": []}
     for e in library.LIBRARY:
-        out[e.name] = [e.name]
+        if e.name not in LATER:
+            out[e.name] = [e.name]
     for name in SENSOR_FAULTS:
         out[name] = [name]
     for a, b in PAIRS:
         out[f"{a}+{b}"] = [a, b]
+    for name in LATER:
+        out[name] = [name]
     return out
 
 

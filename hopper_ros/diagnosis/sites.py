@@ -68,6 +68,7 @@ _BY_EFFECT_DIRECTION = {
     ("touchdown", "vertical"): ("touchdown_timing",),
     ("stance_leg", "along"): ("stance_along",), ("stance_leg", "horizontal"): ("stance_along", "stance_hip"),
     ("liftoff", "both"): ("liftoff_along", "liftoff_across"),
+    ("stance_hip", "hip, across at touchdown"): ("stance_hip", "touchdown_across"),
 }
 
 

@@ -218,6 +218,13 @@ LIBRARY: tuple[Effect, ...] = (
     _e("liftoff_collision", "liftoff", "liftoff", "both",
        Parameter("m_t", "kg", 0.0, 0.3, "toe_mass"),
        "v+ = m_b/(m_b + m_t) v-  (2.12)", "the toe mass of the lift-off collision differs from the model's", SPEEDS),
+    # ---- the hip's inertia (added after the sweeps' seeds were fixed: bench/diagnosis_sim_sweep.py lists it last)
+    _e("rotor_inertia", "actuator", "stance_hip", "hip, across at touchdown",
+       Parameter("J", "kg m^2", 0.0, 0.015, "rotor_inertia"),
+       "tau_e = (tau - J (A - 2 rho' theta')/rho) / (1 + J B/rho^2) in stance (2.9): tau - J theta''; at touchdown "
+       "v_across+ = v_across- m rho_0^2/(m rho_0^2 + J)",
+       "the hip motor's rotor seen through the gear (J_rotor N^2) turns with the leg: the still leg's rotor is spun "
+       "up at touchdown at the body's expense, and in stance part of the hip torque turns it", SPEEDS),
 )
 
 

@@ -107,6 +107,7 @@ class Coefficients:
     torque_limit: object = math.inf         # [N m] |tau| <= limit
     hip_viscous: object = 0.0               # [N m s/rad] - b theta'
     hip_friction: object = 0.0              # [N m] - f tanh(theta'/w_s)
+    rotor_inertia: object = 0.0             # J [kg m^2] about the hip: the motor's rotor through the gear (J_r N^2)
     # discovered terms (coefficients of the term libraries of physics.terms)
     flight_y_terms: tuple = field(default_factory=lambda: zero_terms("flight_y"))
     flight_z_terms: tuple = field(default_factory=lambda: zero_terms("flight_z"))
@@ -165,7 +166,7 @@ def active(c: Coefficients) -> frozenset:
 # the coefficients whose law is skipped where they are 0 (`is_on`); ground_friction is on where finite, and a
 # `*_terms` field where any of its coefficients is not 0
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "spring_cubic", "spring_preload",
-         "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness")
+         "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness", "rotor_inertia")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -277,6 +278,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
         leg_context = stance_context(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown,
                                      tau, command, c.leg_knot)
         spring_only = spring_only + sum_terms(leg_term, c.leg_terms, leg_context)
+    if is_on(c, "rotor_inertia"):
+        tau = rotor_torque(c, tau, spring_only - c.damping * approach, sin, cos, rho, approach, theta_dot)
     depth_rate = 0.0
     if is_on(c, "ground_stiffness"):
         push = (spring_only - c.damping * approach) * cos - tau / rho * sin
@@ -294,6 +297,30 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
         ydd = ydd + c.track_gravity
     zdd = (force * cos - across * sin) / c.mass - c.gravity
     return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, toe_rate, ydd, zdd)
+
+
+def rotor_torque(c: Coefficients, tau, force, sin, cos, rho, rho_dot, theta_dot):
+    """The torque about the hip that reaches the leg, and through the toe the body, when the hip turns an inertia J
+    (`rotor_inertia`: the motor's rotor through the gear, J_r N^2) as the leg turns: tau - J theta''.
+
+    The body's pitch is held by the boom, so the rotor turns by N theta relative to a body that does not turn.
+    With the toe at rest theta'' = (a . e_theta - 2 rho' theta')/rho (the body's acceleration across the leg), and
+    a = (F e_rho + (tau_e/rho) e_theta)/M - g e_z with M = diag(m (1 + r), m) (2.9). Solved for tau_e:
+
+        tau_e = (tau - J (A - 2 rho' theta')/rho) / (1 + J B / rho^2),
+        A = F e_rho . M^-1 e_theta + g sin(theta) (+ the track's gravity across the leg),  B = e_theta . M^-1 e_theta
+
+    (r = 0: tau_e = (tau + J (2 rho' theta' - g sin theta)/rho) / (1 + J/(m rho^2)); the inertia adds J to the
+    body's m rho^2 about the toe). F is the leg's force with the toe at rest (a compliant ground's or a sliding
+    toe's motion is left out of theta'' here)."""
+    inverse_y = 1.0 / (c.mass * (1.0 + c.horizontal_mass_ratio))
+    inverse_z = 1.0 / c.mass
+    across_a = force * sin * cos * (inverse_y - inverse_z) + c.gravity * sin
+    if is_on(c, "track_gravity"):
+        across_a = across_a - c.track_gravity * cos
+    across_b = cos * cos * inverse_y + sin * sin * inverse_z
+    return (tau - c.rotor_inertia * (across_a - 2.0 * rho_dot * theta_dot) / rho) \
+        / (1.0 + c.rotor_inertia * across_b / (rho * rho))
 
 
 MAX_SLIP_SPEED = 5.0   # [m/s] bound of the massless toe's sliding speed where the leg is nearly vertical
@@ -348,9 +375,10 @@ def _from_components(sin, cos, along, across):
     return -sin * along - cos * across, cos * along - sin * across
 
 
-def touchdown_velocity(c: Coefficients, theta, ydot, zdot):
+def touchdown_velocity(c: Coefficients, theta, ydot, zdot, leg_rate=0.0):
     """Body velocity just after touchdown at leg angle theta: the rigid model keeps it; the touchdown
-    effects remove shares along and across the leg and add the discovered jump terms."""
+    effects remove shares along and across the leg and add the discovered jump terms; an inertia about the hip is
+    spun up (`rotor_spin_up`, the leg turning at `leg_rate` before, 0 where it is held)."""
     sin, cos, along, across = _leg_components(theta, ydot, zdot)
     context = JumpContext(along, across)
     new_along = along * (1.0 - c.touchdown_loss_along)
@@ -359,7 +387,28 @@ def touchdown_velocity(c: Coefficients, theta, ydot, zdot):
         new_along = new_along + sum_terms(jump_term, c.touchdown_along_terms, context)
     if is_on(c, "touchdown_across_terms"):
         new_across = new_across + sum_terms(jump_term, c.touchdown_across_terms, context)
-    return _from_components(sin, cos, new_along, new_across)
+    ydot, zdot = _from_components(sin, cos, new_along, new_across)
+    if is_on(c, "rotor_inertia"):
+        ydot, zdot = rotor_spin_up(c, sin, cos, ydot, zdot, leg_rate)
+    return ydot, zdot
+
+
+def rotor_spin_up(c: Coefficients, sin, cos, ydot, zdot, leg_rate=0.0):
+    """The body's velocity once the toe is pinned and the leg, held at `leg_rate` (0: held still) in flight, turns
+    with the body at theta' = v . e_theta / rho_0, the inertia J (`rotor_inertia`) spun up with it in that instant.
+
+    The impulse P across the leg that the ground gives the body is the one J takes: M dv = P e_theta,
+    J (theta'+ - theta'-) = -P rho_0, and the pinned toe asks v+ . e_theta = rho_0 theta'+, so
+    P = -(v- . e_theta - rho_0 theta'-) / (B + rho_0^2 / J), B = e_theta . M^-1 e_theta (`rotor_torque`); with
+    r = 0 the velocity across the leg is kept in the share m rho_0^2 / (m rho_0^2 + J)."""
+    inverse_y = 1.0 / (c.mass * (1.0 + c.horizontal_mass_ratio))
+    inverse_z = 1.0 / c.mass
+    rho = c.rest_length
+    across = -cos * ydot - sin * zdot
+    across_b = cos * cos * inverse_y + sin * sin * inverse_z
+    impulse = -(across - rho * leg_rate) * c.rotor_inertia \
+        / (across_b * c.rotor_inertia + rho * rho)
+    return ydot - cos * impulse * inverse_y, zdot - sin * impulse * inverse_z
 
 
 def liftoff_velocity(c: Coefficients, theta, ydot, zdot):

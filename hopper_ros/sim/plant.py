@@ -399,7 +399,7 @@ class Plant:
             self.touchdown_time = self.t
             self.touchdown_angle = s[THETA]
             s[DEPTH] = s[SLIP] = 0.0
-            ydot, zdot = laws.touchdown_velocity(c, s[THETA], s[YDOT], s[ZDOT])
+            ydot, zdot = laws.touchdown_velocity(c, s[THETA], s[YDOT], s[ZDOT], s[THETA_DOT])
             s[YDOT], s[ZDOT] = float(ydot), float(zdot)
             self.events.append(self._event("touchdown", self.t, s))
             self.phase = Phase.COMPRESSION
