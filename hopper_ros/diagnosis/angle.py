@@ -23,6 +23,7 @@ for it is dropped: plant B's backlash was named an actuator lag).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -33,11 +34,13 @@ from hopper_ros.physics import effects as library
 from . import acceptance
 from .candidates import Candidate, library_candidate
 from .discover import FOLDS, site_residuals
+from .fitting import vertex
 from .records import Reference, Scored
 from .search import Search
 from .simulate import BACKLASH, Variant
 
 SITE = "stance_hip"
+NEAR = (-1.0, -0.5, 0.0, 0.5, 1.0)    # the periods tried by trajectory about the scan's best, in steps of the scan
 
 
 def gear_ratio(settings) -> float:
@@ -117,19 +120,21 @@ def _held_out(designs: list, residuals: list, fold: np.ndarray) -> np.ndarray:
     return out
 
 
-def find_ripple(sets, settings, gear: float) -> Ripple | None:
-    """The period of the hip's residual in the leg angle that predicts held-out strides best, where it beats a
-    constant and a slope in the angle there (t >= `min_t`); None otherwise."""
+def find_ripple(sets, settings, gear: float) -> list[Ripple]:
+    """The period of the hip's residual in the leg angle that predicts held-out strides best (the vertex of the
+    scan's held-out SSE about its least), where it beats a constant and a slope in the angle there (t >= `min_t`):
+    the ripple at it and at periods `NEAR` steps of the scan about it, which the trajectories tell apart (the
+    residual's own fit is biased by what else it holds); none otherwise."""
     strides = []
     for residual, ctx in site_residuals(SITE, sets):
         ok = np.isfinite(residual) & np.isfinite(ctx["theta"])
         if ok.sum() >= 4:
             strides.append((np.asarray(ctx["theta"], float)[ok], residual[ok]))
     if len(strides) < 2 * FOLDS:
-        return None
+        return []
     scan = periods(np.concatenate([th for th, _ in strides]), gear, settings)
-    if not len(scan):
-        return None
+    if len(scan) < 3:
+        return []
     fold = np.arange(len(strides)) % FOLDS
     residuals = [r for _, r in strides]
 
@@ -139,14 +144,19 @@ def find_ripple(sets, settings, gear: float) -> Ripple | None:
         return np.column_stack([np.sin(2 * np.pi * th / period), np.cos(2 * np.pi * th / period)])
 
     plain = _held_out([design(th) for th, _ in strides], residuals, fold)
-    trials = [(_held_out([design(th, p) for th, _ in strides], residuals, fold), p) for p in scan]
-    held, period = min(trials, key=lambda trial: trial[0].sum())
-    t = acceptance.paired_t(plain, held)
+    trials = [_held_out([design(th, p) for th, _ in strides], residuals, fold) for p in scan]
+    best = int(np.argmin([trial.sum() for trial in trials]))
+    t = acceptance.paired_t(plain, trials[best])
     if not t >= settings.min_t:
-        return None
-    X = np.vstack([design(th, period) for th, _ in strides])
-    coef = np.linalg.lstsq(X, np.concatenate(residuals), rcond=None)[0]
-    return Ripple(float(period), float(coef[0]), float(coef[1]), float(t), gear)
+        return []
+    step = math.log(scan[1] / scan[0])
+    centre = math.exp(vertex(np.log(scan), np.array([trial.sum() for trial in trials])))
+    found = []
+    for period in centre * np.exp(step * np.array(NEAR)):
+        X = np.vstack([design(th, period) for th, _ in strides])
+        coef = np.linalg.lstsq(X, np.concatenate(residuals), rcond=None)[0]
+        found.append(Ripple(float(period), float(coef[0]), float(coef[1]), float(t), gear))
+    return found
 
 
 def ripple_candidate(found: Ripple) -> Candidate:
@@ -179,10 +189,12 @@ def find_angle_law(search: Search, chosen: list[Scored], current: Reference, set
     None otherwise."""
     settings = search.settings
     laws = [backlash_candidate(settings, search.data.quantum.get("theta", 0.0))]
-    if SITE in located:
-        ripple = find_ripple(sets, settings, gear_ratio(settings))
-        laws += [ripple_candidate(ripple)] if ripple else []
     stack = search.stack(chosen)
+    ripples = find_ripple(sets, settings, gear_ratio(settings)) if SITE in located else []
+    if ripples:      # the period the trajectories fit best
+        trial = search.search(stack, [dataclasses.replace(ripple_candidate(r), name=f"hip_ripple_{k}")
+                                      for k, r in enumerate(ripples)], current)
+        laws.append(ripple_candidate(ripples[int(max(trial, key=lambda r: r.reduction).name.split("_")[-1])]))
     taken = {r.name for r in chosen}
     excited = {"command": float(np.max(np.abs(search.data.strides.tau_0), initial=0.0))}
     rivals = search.screen(stack, [library_candidate(e, stack.variant().coefficients, excited)
