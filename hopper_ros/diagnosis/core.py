@@ -10,6 +10,7 @@ accepted by the rules of `acceptance`, one effect a round (`rounds`).
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -69,7 +70,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     left = completeness(model.errors, after, floor, residual_location, settings)
     if not left.explained:      # what the accepted effects leave may depend on the leg angle or its reversals
         progress.say("the leg angle's periodic dependence and the direction since the last reversal")
-        found = _with_angle_law(search, chosen, model, residual_location)
+        found = _with_angle_law(search, chosen, model)
         if found is not None:
             chosen = found
             state = _accepted(search, chosen, log, model, base_sim["series"], moves)
@@ -162,19 +163,31 @@ def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drif
     return kept, variant, found
 
 
-def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, residual_location: list):
-    """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`) beside them, each
-    earlier one revisited beside it (dropped where it stood in for it); None where no such law passes its guards."""
-    settings = search.settings
-    current = search.held_out(chosen) if chosen else model
-    located = {loc.site for loc in residual_location if loc.ratio >= settings.locate_threshold}
-    top = find_angle_law(search, chosen, current, locate(search.data, search.stack(chosen).variant())[1], located)
-    if top is None:
-        return None
-    found = list(chosen) + [top]
-    if len(found) > 1:
-        revisit(search, found, Reference(top.held_sse, top.errors))
-    return found
+def _with_angle_law(search: Search, chosen: list[Scored], model: Reference):
+    """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`): beside them all,
+    or else in place of one of them (that one stood in for it: plant B's backlash was named an actuator lag), the
+    set then kept where it `replaces` the accepted one as a whole explanation; each earlier effect revisited beside
+    the law. None where no such law passes its guards."""
+    settings, data = search.settings, search.data
+    accepted, best = (search.held_out(chosen) if chosen else model), None
+    for left_out in [None] + list(range(len(chosen))):
+        kept = copy.deepcopy([r for k, r in enumerate(chosen) if k != left_out])    # a trial moves magnitudes
+        variant = search.stack(kept).variant()
+        locations, sets = locate(data, variant)
+        located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
+        top = find_angle_law(search, kept, search.held_out(kept) if kept else model, sets, located)
+        if top is None:
+            continue
+        found = kept + [top]
+        if len(found) > 1:
+            revisit(search, found, Reference(top.held_sse, top.errors))
+        if left_out is None:
+            return found
+        trial = search.held_out(found)
+        if acceptance.replaces(trial, accepted, model.errors, settings) and (best is None or
+                                                                             trial.sse.sum() < best[0].sse.sum()):
+            best = (trial, found)
+    return best[1] if best else None
 
 
 def correlation_length(resid: np.ndarray) -> float:
