@@ -164,30 +164,34 @@ def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drif
 
 
 def _with_angle_law(search: Search, chosen: list[Scored], model: Reference):
-    """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`): beside them all,
-    or else in place of one of them (that one stood in for it: plant B's backlash was named an actuator lag), the
-    set then kept where it `replaces` the accepted one as a whole explanation; each earlier effect revisited beside
-    the law. None where no such law passes its guards."""
+    """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`) beside them all,
+    and in place of each of them (that one may have stood in for it: plant B's backlash was named an actuator lag),
+    each earlier effect revisited beside the law. Of the sets found, the smallest whose held-out fit is not clearly
+    worse (paired t below `tie_t`, the sum of E_p, E_v, E_t not worse by `apex_tolerance`) than the best's; one found
+    in place of an effect only where it `replaces` the accepted set as a whole explanation. None where no law
+    passes its guards."""
     settings, data = search.settings, search.data
-    accepted, best = (search.held_out(chosen) if chosen else model), None
+    accepted, found = (search.held_out(chosen) if chosen else model), []
     for left_out in [None] + list(range(len(chosen))):
         kept = copy.deepcopy([r for k, r in enumerate(chosen) if k != left_out])    # a trial moves magnitudes
-        variant = search.stack(kept).variant()
-        locations, sets = locate(data, variant)
+        locations, sets = locate(data, search.stack(kept).variant())
         located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
         top = find_angle_law(search, kept, search.held_out(kept) if kept else model, sets, located)
         if top is None:
             continue
-        found = kept + [top]
-        if len(found) > 1:
-            revisit(search, found, Reference(top.held_sse, top.errors))
-        if left_out is None:
-            return found
-        trial = search.held_out(found)
-        if acceptance.replaces(trial, accepted, model.errors, settings) and (best is None or
-                                                                             trial.sse.sum() < best[0].sse.sum()):
-            best = (trial, found)
-    return best[1] if best else None
+        trial = kept + [top]
+        if len(trial) > 1:
+            revisit(search, trial, Reference(top.held_sse, top.errors))
+        held = search.held_out(trial)
+        if left_out is None or acceptance.replaces(held, accepted, model.errors, settings):
+            found.append((held, trial))
+    if not found:
+        return None
+    best = min(found, key=lambda f: f[0].sse.sum())[0]
+    alike = [(len(trial), held.sse.sum(), trial) for held, trial in found
+             if acceptance.paired_t(held.sse, best.sse) < settings.tie_t
+             and held.errors.total <= best.errors.total * (1 + settings.apex_tolerance)]
+    return min(alike, key=lambda f: f[:2])[2]
 
 
 def correlation_length(resid: np.ndarray) -> float:
