@@ -34,8 +34,9 @@ MATCH = {
     "harder_liftoff_collision": ({"liftoff_collision": lambda m: TOE_MASS + m}, {"liftoff_along", "liftoff_across"}),
     "z_sensor_scale": ({"z_scale": lambda m: 1 + m}, set()),
     "theta_sensor_delay": ({"theta_delay": lambda m: m}, set()),
-    "theta_encoder_backlash": ({"theta_delay": None, "theta_offset": None}, {"stance_hip"}),
-    "hip_cogging_ripple": ({}, {"stance_hip"}),
+    "theta_encoder_backlash": ({"theta_backlash": lambda m: m, "theta_delay": None, "theta_offset": None},
+                               {"stance_hip"}),
+    "hip_cogging_ripple": ({"hip_ripple": lambda m: m}, {"stance_hip"}),
     "spring_stiffness_drift": ({"leg_stiffness": None}, {"stance_along"}),
     "hip_torque_axial_coupling": ({}, {"stance_along"}),
     "boom_ringing_after_liftoff": ({}, {"flight_vertical", "flight_horizontal"}),
@@ -44,6 +45,8 @@ MATCH = {
 }
 
 
+# the laws of `diagnosis.angle` (a backlash, a ripple periodic in the leg angle) count within 25 %, as a dependence
+TOLERANCE = {"theta_backlash": 0.25, "hip_ripple": 0.25}
 # plant-B mechanism -> the main parameter whose drift (`diagnosis.drift`) is that mechanism, and the library entry
 # that holds the same parameter's level beside the trend (part of the same finding, not a verdict of its own)
 DRIFTS = {"spring_stiffness_drift": "stiffness"}
@@ -86,7 +89,7 @@ def score(result, truth: dict) -> dict:
                         found = (k, f"{c.name} {option.magnitude:.4g} (look-alike)")
                     else:
                         want = convert(float(effect["magnitude"]))
-                        if abs(option.magnitude - want) <= 0.2 * abs(want):
+                        if abs(option.magnitude - want) <= TOLERANCE.get(c.name, 0.2) * abs(want):
                             found = (k, f"{c.name} {option.magnitude:.4g} (true {want:.4g})")
                             by_mechanism.append(effect["id"])
                 elif c.kind == "discovered" and c.site in sites:

@@ -30,6 +30,8 @@ CASES = [
     ("grid", 7.5, "diagnosis.grid: must be an integer (>= 2), got 7.5"),
     ("min_t", "three", "diagnosis.min_t: must be a number (>= 0), got 'three'"),
     ("liftoff_window", 0.0, "diagnosis.liftoff_window: must be > 0 s, got 0"),
+    ("backlash_max", 0.0, "diagnosis.backlash_max: must be > 0 rad, got 0"),
+    ("angle_scan", 1, "diagnosis.angle_scan: must be >= 2, got 1"),
     ("min_tt", 3.0, "diagnosis.min_tt: unknown key; known here: folds, grid, min_strides"),
 ]
 

@@ -57,7 +57,7 @@ class Candidate:
 def candidate_sites(c: Candidate) -> tuple:
     """The located sites where a candidate's change acts: a discovered term set at its own site, a library
     effect by its site and direction."""
-    if c.kind == "discovered":
+    if c.kind == "discovered" or c.name not in library.EFFECTS:     # discovered, or a law of `angle`
         return (c.site,)
     effect = library.get(c.name)
     return effect_sites(effect.site, effect.direction)

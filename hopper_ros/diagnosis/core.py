@@ -10,6 +10,7 @@ accepted by the rules of `acceptance`, one effect a round (`rounds`).
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -21,6 +22,7 @@ from hopper_ros.physics.params import ModelParams
 from hopper_ros.recording.recordings import Recording
 
 from . import acceptance
+from .angle import find_angle_law
 from .candidates import candidate_sites
 from .data import PHASES, StrideData, own_ramps, prepare
 from .dependence import find_dependence, lap_length
@@ -30,7 +32,7 @@ from .lookalikes import discovered_look_alikes, fit_secondary
 from .progress import QUIET, Progress
 from .records import Diagnosis, Errors, Reference, Scored, completeness
 from .report import verdict
-from .rounds import Log, restarts, rounds
+from .rounds import Log, restarts, revisit, rounds
 from .search import Search
 from .settings import Settings, load_settings  # noqa: F401  (the engine's settings, read here by callers)
 from .simulate import Variant, simulate_variants
@@ -45,14 +47,9 @@ def base_variant(params: ModelParams, model_effects: dict | None = None) -> Vari
 def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effects: dict | None = None,
              progress: Progress = QUIET) -> Diagnosis:
     progress.say("preparing the strides")
-    data = prepare(rec, params, settings.min_strides, settings.liftoff_window)
-    base = base_variant(params, model_effects)
-    base_sim = simulate_variants(data, [base], keep_series=True)
+    search, base_sim, model = start(rec, params, settings, model_effects, progress)
+    data, base = search.data, search.base
     moves = start_moves(data, base, base_sim)
-    data.corr_length = max(1.0, float(np.median([correlation_length(r["z"][0]) for r in base_sim["series"]])))
-    data.model_sse = float(base_sim["sse"][0].sum())
-    search = Search(data, base, settings, progress)
-    model = Reference(base_sim["sse"][0], Errors.of(data, {k: v[0] for k, v in base_sim["pred"].items()}))
     excited = {"command": float(np.max(np.abs(data.strides.tau_0), initial=0.0))}
     log = Log()
     chosen, _ = rounds(search, excited, [], model, log)
@@ -71,6 +68,15 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     floor = noise_floor(data, moves)
     residual_location = state.residual_location
     left = completeness(model.errors, after, floor, residual_location, settings)
+    if not left.explained:      # what the accepted effects leave may depend on the leg angle or its reversals
+        progress.say("the leg angle's periodic dependence and the direction since the last reversal")
+        found = _with_angle_law(search, chosen, model)
+        if found is not None:
+            chosen = found
+            state = _accepted(search, chosen, log, model, base_sim["series"], moves)
+            drifts = find_drift(data, state.current, settings)[:1]
+            after, residual_location = (drifts[0].after if drifts else state.after), state.residual_location
+            left = completeness(model.errors, after, floor, residual_location, settings)
     dependences = []
     if not left.explained:      # what the accepted effects leave may depend on where along the track a stride is
         progress.say("the floor's dependence on the place along the track")
@@ -88,6 +94,19 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
                      verdict(chosen, residual_location if chosen or dependences else state.first_location,
                              settings.locate_threshold, left, drifts, dependences),
                      settings, dict(model_effects or {}), completeness=left, drifts=drifts, dependences=dependences)
+
+
+def start(rec: Recording, params: ModelParams, settings: Settings, model_effects: dict | None = None,
+          progress: Progress = QUIET) -> tuple[Search, dict, Reference]:
+    """The recording made ready and the model simulated on it: the search every step shares, the model's
+    simulation with its series, and its reference (per-stride SSE, held-out errors)."""
+    data = prepare(rec, params, settings.min_strides, settings.liftoff_window)
+    base = base_variant(params, model_effects)
+    base_sim = simulate_variants(data, [base], keep_series=True)
+    data.corr_length = max(1.0, float(np.median([correlation_length(r["z"][0]) for r in base_sim["series"]])))
+    data.model_sse = float(base_sim["sse"][0].sum())
+    model = Reference(base_sim["sse"][0], Errors.of(data, {k: v[0] for k, v in base_sim["pred"].items()}))
+    return Search(data, base, settings, progress), base_sim, model
 
 
 @dataclass
@@ -142,6 +161,37 @@ def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drif
     if found:
         variant = Variant(variant.coefficients, variant.sensors, {**variant.per_stride, **found[0].per_stride})
     return kept, variant, found
+
+
+def _with_angle_law(search: Search, chosen: list[Scored], model: Reference):
+    """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`) beside them all,
+    and in place of each of them (that one may have stood in for it: plant B's backlash was named an actuator lag),
+    each earlier effect revisited beside the law. Of the sets found, the smallest whose held-out fit is not clearly
+    worse (paired t below `tie_t`, the sum of E_p, E_v, E_t not worse by `apex_tolerance`) than the best's; one found
+    in place of an effect only where it `replaces` the accepted set as a whole explanation. None where no law
+    passes its guards."""
+    settings, data = search.settings, search.data
+    accepted, found = (search.held_out(chosen) if chosen else model), []
+    for left_out in [None] + list(range(len(chosen))):
+        kept = copy.deepcopy([r for k, r in enumerate(chosen) if k != left_out])    # a trial moves magnitudes
+        locations, sets = locate(data, search.stack(kept).variant())
+        located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
+        top = find_angle_law(search, kept, search.held_out(kept) if kept else model, sets, located)
+        if top is None:
+            continue
+        trial = kept + [top]
+        if len(trial) > 1:
+            revisit(search, trial, Reference(top.held_sse, top.errors))
+        held = search.held_out(trial)
+        if left_out is None or acceptance.replaces(held, accepted, model.errors, settings):
+            found.append((held, trial))
+    if not found:
+        return None
+    best = min(found, key=lambda f: f[0].sse.sum())[0]
+    alike = [(len(trial), held.sse.sum(), trial) for held, trial in found
+             if acceptance.paired_t(held.sse, best.sse) < settings.tie_t
+             and held.errors.total <= best.errors.total * (1 + settings.apex_tolerance)]
+    return min(alike, key=lambda f: f[:2])[2]
 
 
 def correlation_length(resid: np.ndarray) -> float:

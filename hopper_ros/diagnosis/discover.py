@@ -97,9 +97,8 @@ def _knots(site: str, sets) -> tuple:
     return tuple(float(q) for q in np.quantile(np.concatenate(values), KNOT_QUANTILES))
 
 
-def site_samples(site: str, sets, knot: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per stride (design matrix, bias-corrected residual) of one site."""
-    library, kind = REGISTRY[site].terms, REGISTRY[site].context
+def site_residuals(site: str, sets) -> list[tuple[np.ndarray, dict]]:
+    """Per stride (bias-corrected residual samples, their context) of one site (strides without it left out)."""
     rec, clean, _ = sets
     out = []
     for r, c0 in zip(rec, clean):
@@ -112,11 +111,21 @@ def site_samples(site: str, sets, knot: float = 0.0) -> list[tuple[np.ndarray, n
             bias = np.interp(u, bias_u[order], bias_values[order])
         else:
             bias = np.full_like(values, bias_values[0])
+        out.append((values - bias, ctx))
+    return out
+
+
+def site_samples(site: str, sets, knot: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per stride (design matrix, bias-corrected residual) of one site."""
+    library, kind = REGISTRY[site].terms, REGISTRY[site].context
+    out = []
+    for residual, ctx in site_residuals(site, sets):
         context = _context(kind, ctx, knot)
-        X = np.column_stack([np.broadcast_to(library.value(i, context), values.shape) for i in range(len(library.terms))])
-        ok = np.all(np.isfinite(X), axis=1) & np.isfinite(values - bias)
+        X = np.column_stack([np.broadcast_to(library.value(i, context), residual.shape)
+                             for i in range(len(library.terms))])
+        ok = np.all(np.isfinite(X), axis=1) & np.isfinite(residual)
         if ok.any():
-            out.append((X[ok], (values - bias)[ok]))
+            out.append((X[ok], residual[ok]))
     return out
 
 

@@ -24,7 +24,7 @@ from hopper_ros.physics import lanes, laws
 
 from .data import LEAD_RESOLVED, StrideData
 from .ringing import ringing, since_liftoff
-from .simulate import Variant, variant_key
+from .simulate import BACKLASH, Variant, hold_direction, variant_key
 from .sites import CHANNEL_SITE, REGISTRY, RESIDUAL_SITES, TRAJECTORY_SITES
 from .smoothing import smooth
 
@@ -367,13 +367,18 @@ def timing_location(data: StrideData, variant: Variant) -> Location | None:
     faults undone); size over noise as the median's t / 3."""
     rec, sensors = data.rec, variant.sensors
     height = (rec.z - sensors["z_offset"]) / sensors["z_scale"]
+    play, swing = sensors.get(BACKLASH, 0.0), hold_direction(data)
     leads = []
     for i, (td, start, angle) in enumerate(zip(data.strides.touchdown_time, data.stance_start,
                                                data.strides.touchdown_angle)):
         c = variant.stride_coefficients(i)
         a = int(np.searchsorted(rec.t, td))
         k = np.arange(max(a - 40, 1), min(a + 10, len(rec.t)))
-        held = (angle - sensors["theta_offset"]) / sensors["theta_scale"]
+        held = (angle - sensors["theta_offset"]) / sensors["theta_scale"] + 0.5 * play * swing[i]
+        if play > 0.0:      # through a backlash the reading starts to turn once the leg has turned the play
+            b = int(np.searchsorted(rec.t, start))
+            speed = abs(rec.theta[min(b + 5, len(rec.t) - 1)] - rec.theta[b]) / 0.005
+            start = start - play / max(speed, play / 0.02)
         toe = height[k] - float(c.rest_length) * math.cos(held) - float(c.ground_height)
         below = np.flatnonzero((toe[1:] <= 0.0) & (toe[:-1] > 0.0))
         if below.size:

@@ -63,6 +63,7 @@ def verdict(chosen: list, left: list | None = None, threshold: float = math.inf,
         else:
             text = f"{c.name} = {r.magnitude:.4g} {c.unit}".rstrip()
             text += "".join(f" ({k} {v:.4g} {u})" for k, (v, u) in c.held.items())
+            text += f": {c.describe(r.value)}" if c.discovery is not None else ""     # a law of `angle`
         if r.ties:
             text += " (or " + " or ".join(t.name for t in r.ties) + ": not separable on this data)"
         parts.append(text)

@@ -46,6 +46,11 @@ class Settings:
     track_harmonics: int = 3         # waves of 1 .. this many periods a lap tried
     track_bins: int = 24             # a board's edges on this grid a lap
     secondary_grid: int = 5          # values of an accepted entry's secondary parameter tried (geometric)
+    angle_scan: int = 60             # periods of the frequency scan over the leg angle (geometric)
+    motor_harmonics: int = 8         # ... the shortest: the motor's turn through the gear over this
+    ripple_cycles: float = 1.5       # ... the longest: the angle's recorded range over this
+    gear_ratio: float = 0.0          # motor turns per leg turn (0: hardware.yaml's motor.gear_ratio)
+    backlash_max: float = 0.03       # [rad] the widest backlash of the leg angle's encoder searched
 
 
 _SHARE = {"ge": 0, "le": 1}
@@ -61,6 +66,8 @@ LIMITS = {
     "trajectory_threshold": {"gt": 0}, "floor_factor": {"gt": 0}, "drift_share": _SHARE,
     "dependence_share": _SHARE, "track_lap": {"ge": 0, "unit": "m"}, "track_harmonics": _COUNT, "track_bins": {"ge": 4},
     "explained_left_pct": {"ge": 0, "le": 100, "unit": "%"}, "secondary_grid": _COUNT,
+    "angle_scan": {"ge": 2}, "motor_harmonics": _COUNT, "ripple_cycles": {"gt": 0}, "gear_ratio": {"ge": 0},
+    "backlash_max": {"gt": 0, "le": 0.5, "unit": "rad"},
 }
 
 

@@ -13,6 +13,7 @@ per-phase sums and the residual series (`keep_series`).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,6 +29,28 @@ CHANNELS = ("y", "z", "theta")
 BATCH_LANES = 4000      # lanes per integration call (memory: 5 x lanes x samples float32)
 KEPT_VARIANTS = 20000   # variants whose results a StrideData keeps (about 2 kB each for 50 strides)
 FIELDS = laws.Coefficients.scalar_names() + laws.Coefficients.term_names()
+BACKLASH = "theta_backlash"   # the sensors' key of the leg angle encoder's backlash [rad] (`backlash_reading`)
+
+
+def backlash_reading(theta: np.ndarray, start: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """What an encoder with play 2 `half` between it and the leg reads of the angles `theta` (lanes, samples):
+    the reading stands still after each reversal until the leg has turned the whole play, then follows it
+    `half` behind (the play operator, r = clamp(r_prev, theta - half, theta + half)), from the reading `start`."""
+    out = np.empty_like(theta)
+    r = np.asarray(start, dtype=theta.dtype).copy()
+    h = np.asarray(half, dtype=theta.dtype)
+    for j in range(theta.shape[1]):
+        r = np.where(np.isfinite(theta[:, j]), np.clip(r, theta[:, j] - h, theta[:, j] + h), theta[:, j])
+        out[:, j] = r
+    return out
+
+
+def hold_direction(data: StrideData) -> np.ndarray:
+    """Per stride, the way the leg last turned before it was held for touchdown (+1 where the angle rose, -1
+    where it fell, 0 where it did not swing by 4 noise levels): the way an encoder with play lags the hold."""
+    s, theta = data.strides, data.rec.theta
+    swing = s.touchdown_angle - theta[np.asarray(s.start, dtype=int)]
+    return np.where(np.abs(swing) > 4.0 * data.sigma["theta"], np.sign(swing), 0.0)
 
 
 @dataclass
@@ -110,11 +133,15 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
     rings = {ch: {ringing.key(ch, p): np.array([v.sensors.get(ringing.key(ch, p), 0.0) for v in variants])[:, None]
                   for p in ringing.KEYS} for ch in CHANNEL_SITE}
     z0 = (np.tile(s.apex_height, nv) - sens["z_offset"]) / sens["z_scale"]
-    theta_td = (np.tile(s.touchdown_angle, nv) - sens["theta_offset"]) / sens["theta_scale"]
+    held = (np.tile(s.touchdown_angle, nv) - sens["theta_offset"]) / sens["theta_scale"]
+    play = 0.5 * np.repeat(np.array([v.sensors.get(BACKLASH, 0.0) for v in variants]), ns)
+    theta_td = held + play * np.tile(hold_direction(data), nv)     # the reading lags the swing into the hold
     duration = data.duration + 0.02
     needed = None if keep_series else _needed_samples(data, sens, nv, int(np.floor(duration / 1e-3)) + 1)
     res = lanes.simulate_lanes(coef, z0, np.tile(s.forward_speed, nv) / sens["y_scale"], theta_td,
                                np.tile(s.tau_0, nv), np.tile(s.ramp_duration, nv), duration=duration, needed=needed)
+    if np.any(play > 0.0):
+        res = dataclasses.replace(res, theta=backlash_reading(res.theta, held, play))
     shape = (nv, ns)
     pred = {"height": res.next_apex_height.reshape(shape) * sens["z_scale"].reshape(shape) + sens["z_offset"].reshape(shape),
             "speed": res.next_forward_speed.reshape(shape) * sens["y_scale"].reshape(shape),

@@ -108,6 +108,9 @@ class Coefficients:
     hip_viscous: object = 0.0               # [N m s/rad] - b theta'
     hip_friction: object = 0.0              # [N m] - f tanh(theta'/w_s)
     rotor_inertia: object = 0.0             # J [kg m^2] about the hip: the motor's rotor through the gear (J_r N^2)
+    hip_ripple_sin: object = 0.0            # [N m] a torque ripple periodic in the leg angle (cogging, a gear's
+    hip_ripple_cos: object = 0.0            # [N m]   eccentricity): a sin(2 pi theta/P) + b cos(2 pi theta/P)
+    hip_ripple_period: object = 1.0         # P [rad] of the leg angle
     # discovered terms (coefficients of the term libraries of physics.terms)
     flight_y_terms: tuple = field(default_factory=lambda: zero_terms("flight_y"))
     flight_z_terms: tuple = field(default_factory=lambda: zero_terms("flight_z"))
@@ -166,7 +169,8 @@ def active(c: Coefficients) -> frozenset:
 # the coefficients whose law is skipped where they are 0 (`is_on`); ground_friction is on where finite, and a
 # `*_terms` field where any of its coefficients is not 0
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "spring_cubic", "spring_preload",
-         "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "ground_stiffness", "rotor_inertia")
+         "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "hip_ripple_sin", "hip_ripple_cos",
+         "ground_stiffness", "rotor_inertia")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -228,13 +232,18 @@ def leg_force(c: Coefficients, rho, rho_dot):
     return force
 
 
-def hip_losses(c: Coefficients, theta_dot):
-    """Friction in the hip joint, -b theta' - f tanh(theta'/w_s), added to the applied torque."""
+def hip_losses(c: Coefficients, theta, theta_dot):
+    """Friction in the hip joint, -b theta' - f tanh(theta'/w_s), and a ripple periodic in the leg angle
+    (a motor's cogging or a gear's eccentricity seen through the gear), a sin(2 pi theta/P) + b cos(2 pi theta/P),
+    added to the applied torque."""
     loss = 0.0
     if is_on(c, "hip_viscous"):
         loss = loss - c.hip_viscous * theta_dot
     if is_on(c, "hip_friction"):
         loss = loss - c.hip_friction * smooth_sign(theta_dot)
+    if is_on(c, "hip_ripple_sin") or is_on(c, "hip_ripple_cos"):
+        phase = 2.0 * np.pi * theta / c.hip_ripple_period
+        loss = loss + c.hip_ripple_sin * np.sin(phase) + c.hip_ripple_cos * np.cos(phase)
     return loss
 
 
@@ -268,7 +277,7 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     approach = -sin * ydot + cos * zdot                     # rho' with the toe at rest
     theta = np.arctan2(-dy, hz)
     theta_dot = (-ydot * hz + dy * zdot) / (rho * rho)
-    tau = torque + hip_losses(c, theta_dot)
+    tau = torque + hip_losses(c, theta, theta_dot)
     if is_on(c, "hip_terms"):
         hip_context = stance_context(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown,
                                      torque, command, 0.0)
