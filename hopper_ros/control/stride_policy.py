@@ -24,6 +24,8 @@ instant out. The deadbeat_controller node wires its topics to it; the in-process
   motor driver's watchdog.
 Times are seconds on one clock (the event stamps' clock); a caller may hand its own stamp of an
 instant along (`now_stamp`, the touchdown's `stamp`), which a command at that instant carries back.
+The ramp's instants are kept less the stand-stills the stamps have stepped by (`on_clock`), so that a
+ramp predicted before the robot stood still goes out where the robot's clock puts it after.
 """
 
 from __future__ import annotations
@@ -96,10 +98,10 @@ class StridePolicy:
         self.events: list[tuple[str, str]] = []     # (logger level, text) for the caller's log
         self._clock_offset = math.nan   # [s] the sensing clock's mapping (host minus robot time) of the last event
         self._stood_still = 0.0         # [s] its steps of a stand-still's size so far (`stand_still_step`)
-        # the ramp's instants on the robot's clock (host time less the stand-stills in the stamps so far)
-        self._touchdown: tuple[float, Any, float] = (math.nan, None, 0.0)   # that time, stamp, its mapping
+        # the ramp's instants on the robot's clock: host time less the stand-stills in the stamps so far
+        self._touchdown: tuple[float, Any, float] = (math.nan, None, 0.0)   # that time, stamp, _stood_still then
         self._predicted_touchdown = math.nan
-        self._offset_at_prediction = 0.0
+        self._stood_still_at_prediction = 0.0
         self._release_at = math.inf     # the pre-touchdown instant heard ahead: the leg let go then
         self._cancelled_ramp = False
         self._brake_since = math.nan
@@ -164,9 +166,9 @@ class StridePolicy:
         heard, 1 ms ahead, it sent the ramp late under a real-time load beside the loop: its torque
         reached the leg 5.4 ms after a touchdown)."""
         self._release_at = time
-        self._predicted_touchdown = time - self._mapping + self.time_to_touchdown(
+        self._predicted_touchdown = time - self._stood_still + self.time_to_touchdown(
             z, z_dot, leg_angle, leg_angle_rate) if self.settings.ramp_ahead else math.nan
-        self._frozen_at_prediction, self._offset_at_prediction = self._frozen_time, self._mapping
+        self._frozen_at_prediction, self._stood_still_at_prediction = self._frozen_time, self._stood_still
         self._cancelled_ramp = False
 
     def time_to_touchdown(self, z: float, z_dot: float, leg_angle: float, leg_angle_rate: float) -> float:
@@ -177,7 +179,7 @@ class StridePolicy:
     def on_touchdown(self, time: float, stamp: Any = None) -> None:
         self._release_at = math.inf
         self.machine.on_touchdown(time)
-        self._touchdown = (time - self._mapping, stamp, self._mapping)
+        self._touchdown = (time - self._stood_still, stamp, self._stood_still)
 
     def on_clock(self, clock_offset: float) -> None:
         """The sensing clock's mapping of the gait event that comes next (its state's stamp minus its
@@ -194,11 +196,6 @@ class StridePolicy:
         if abs(step) >= self.settings.stand_still_step:       # False while unknown (nan)
             self._stood_still += step
         self._clock_offset = clock_offset
-
-    @property
-    def _mapping(self) -> float:
-        """[s] Host minus robot time for the policy's instants: the stand-stills in the stamps so far."""
-        return self._stood_still
 
     def on_liftoff(self, leg_angle: float) -> None:
         self.machine.on_liftoff(leg_angle)
@@ -263,7 +260,7 @@ class StridePolicy:
             self.counters["sensing_lost"] += 1
             self.events.append(("error", f"no gait event for {s.sensing_timeout * 1e3:.0f} ms while hopping: "
                                          "sensing lost, drive disabled"))
-        offset, mapping = self._clock_offset, self._mapping
+        offset, stood_still = self._clock_offset, self._stood_still
         if self.sensing_lost:
             return Command(MODE_DISABLED, 0.0, 0.0, now, now_stamp, offset)
         if self._acknowledge == math.inf:
@@ -283,16 +280,17 @@ class StridePolicy:
         phase, plan = machine.phase, machine.plan
         if phase is Phase.STANCE and plan is not None:
             # the driver runs the ramp itself, from the touchdown time: jitter in the stream cannot shift it
-            touchdown, stamp, its_offset = self._touchdown
-            return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, touchdown + mapping,
-                           stamp if its_offset == mapping else None, offset)
+            touchdown, stamp, stood_still_then = self._touchdown
+            return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, touchdown + stood_still,
+                           stamp if stood_still_then == stood_still else None, offset)
         if phase is Phase.PRE_TOUCHDOWN and plan is not None and math.isfinite(self._predicted_touchdown):
             # the stand-still since the prediction: in the stamps once they re-anchored, else the driver's count
-            frozen = max(0.0, self._frozen_time - self._frozen_at_prediction - (mapping - self._offset_at_prediction))
-            deadline = self._predicted_touchdown + mapping + s.touchdown_grace + frozen
+            frozen = max(0.0, self._frozen_time - self._frozen_at_prediction
+                         - (stood_still - self._stood_still_at_prediction))
+            deadline = self._predicted_touchdown + stood_still + s.touchdown_grace + frozen
             if now <= deadline or self._drive_silent:
                 # scheduled ahead: zero current until the predicted touchdown, then the ramp
-                return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, self._predicted_touchdown + mapping,
+                return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, self._predicted_touchdown + stood_still,
                                None, offset)
             if not self._cancelled_ramp:
                 self._cancelled_ramp = True
