@@ -329,6 +329,34 @@ def test_a_ramp_scheduled_ahead_waits_for_its_stamp_and_moves_to_a_new_one(rig):
     assert r.driver.counters["commands_rejected"] == 0
 
 
+def test_a_ramp_that_reaches_the_driver_after_its_start_is_counted_and_said(rig):
+    """A ramp whose start has passed when it arrives loses its first part (~4 mm of apex a ms): counted, its
+    lateness kept, and said with its cause, so that a stride that misses its apex shows where its torque went. A
+    ramp scheduled ahead and on time is not."""
+    r = rig().start()
+    r.enable(torque=1.0)
+    tau_0, duration = 6.0, 0.05
+    predicted = r.clock.t + 0.010
+    _run_ramp(r, tau_0, duration, predicted, 3)               # ahead: waiting for its stamp
+    r.driver.drain_events()
+    assert r.driver.counters["ramps_begun_late"] == 0
+    measured = r.clock.t - 0.003                               # the touchdown came 3 ms before its prediction
+    _run_ramp(r, tau_0, duration, measured, 2)
+    assert r.driver.counters["ramps_begun_late"] == 1
+    assert r.driver.ramp_late_max == pytest.approx(0.004, abs=1e-6)  # heard at the next step, 1 ms on
+    said = [text for _, text in r.driver.drain_events() if "stance ramp began" in text]
+    assert len(said) == 1 and "the touchdown came before its prediction" in said[0], said
+    r.step(60, command=(MODE_POSITION, 0.0))
+    r.driver.command(MODE_RAMP, 7.0, duration, 0.0045)         # a new ramp whose command came 4.5 ms late
+    assert r.driver.counters["ramps_begun_late"] == 2
+    assert r.driver.ramp_late_max == pytest.approx(0.0045, abs=1e-6)
+    assert any("the command came after its touchdown" in text for _, text in r.driver.drain_events())
+    on_time = r.clock.t + 0.008
+    r.step(5, command=(MODE_POSITION, 0.0))
+    _run_ramp(r, tau_0, duration, on_time + 0.005, 20)          # scheduled ahead, started at its stamp
+    assert r.driver.counters["ramps_begun_late"] == 2
+
+
 @pytest.mark.parametrize("phase", [0.0, 0.25e-3, 0.5e-3, 0.9e-3])
 def test_the_ramp_gives_its_whole_impulse_wherever_the_touchdown_falls_between_two_syncs(rig, phase):
     """The drive holds each current for a SYNC period: the period the touchdown falls in gets the ramp's

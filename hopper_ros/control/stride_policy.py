@@ -101,6 +101,7 @@ class StridePolicy:
         # the ramp's instants on the robot's clock: host time less the stand-stills in the stamps so far
         self._touchdown: tuple[float, Any, float] = (math.nan, None, 0.0)   # that time, stamp, _stood_still then
         self._predicted_touchdown = math.nan
+        self.prediction_late_max = self.prediction_early_max = 0.0   # [s] predicted touchdowns against measured
         self._stood_still_at_prediction = 0.0
         self._release_at = math.inf     # the pre-touchdown instant heard ahead: the leg let go then
         self._cancelled_ramp = False
@@ -180,6 +181,10 @@ class StridePolicy:
         self._release_at = math.inf
         self.machine.on_touchdown(time)
         self._touchdown = (time - self._stood_still, stamp, self._stood_still)
+        if math.isfinite(self._predicted_touchdown):     # on the robot's clock, both
+            late = self._predicted_touchdown - self._touchdown[0]
+            self.prediction_late_max = max(self.prediction_late_max, late)
+            self.prediction_early_max = max(self.prediction_early_max, -late)
 
     def on_clock(self, clock_offset: float) -> None:
         """The sensing clock's mapping of the gait event that comes next (its state's stamp minus its

@@ -259,7 +259,9 @@ class DeadbeatControllerNode(Node):
                   "refine_time_s": decision.compute_time if decision else math.nan,
                   "command_gap_p99_s": self.published_gaps.quantile(0.99), "command_gap_max_s": self.published_gaps.max,
                   "command_gap_period_max_s": self.published_gaps.take_recent(),
-                  "repeat_late_max_s": self._repeater.late_max, "repeat_priority": self._repeater.priority}
+                  "repeat_late_max_s": self._repeater.late_max, "repeat_priority": self._repeater.priority,
+                  "touchdown_predicted_late_max_s": policy.prediction_late_max,
+                  "touchdown_predicted_early_max_s": policy.prediction_early_max}
         safe = policy.phase is Phase.SAFE
         self._diagnostics.report(policy.counters, values, policy.machine.reason if safe else "", WARN if safe else OK)
 

@@ -150,12 +150,13 @@ class MotorDriverNode(Node):
             status = self._driver.status
             gaps = self._driver.command_gaps
             values = [self._driver.settings.command_timeout, status.current, status.position, gaps.quantile(0.99),
-                      gaps.max, gaps.take_recent(), self._driver.frozen_so_far()]
+                      gaps.max, gaps.take_recent(), self._driver.frozen_so_far(), self._driver.ramp_late_max]
             silent = int(self._driver.silent)
         self._diagnostics.report(
             {**dict(zip(COUNTER_NAMES, counters)), "cycle_overruns": self._loop.overruns, "drive_silent": silent},
             dict(zip(["command_timeout_s", "current_a", "position_rad", "command_gap_p99_s", "command_gap_max_s",
-                      "command_gap_period_max_s", "drive_frozen_s", "cycle_rate_hz"], [*values, self._loop.rate])),
+                      "command_gap_period_max_s", "drive_frozen_s", "ramp_late_max_s", "cycle_rate_hz"],
+                         [*values, self._loop.rate])),
             message, {INFO: diagnostics.OK, WARN: diagnostics.WARN, ERROR: diagnostics.ERROR}[level])
 
     def _log(self, events) -> None:

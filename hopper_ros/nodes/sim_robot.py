@@ -48,7 +48,7 @@ from hopper_ros.nodes.stamps import stamp_of_ns
 from hopper_ros.sim.config import load_sim_config
 from hopper_ros.sim.robot import SimSample
 from hopper_ros.sim.runner import SimRunner
-from hopper_ros.sim.stance import StanceTorque
+from hopper_ros.sim.stance import SAID_AFTER, StanceTorque
 
 EVENT_TYPES = {"apex": GaitEvent.APEX, "touchdown": GaitEvent.TOUCHDOWN, "bottom": GaitEvent.BOTTOM,
                "liftoff": GaitEvent.LIFTOFF}
@@ -140,12 +140,14 @@ class SimRobotNode(Node):
             self._truth.publish(state)
         stances = self.stances
         closed = stances.stances
-        stances.add(sample, self.robot.current_mode)
-        if stances.stances > closed and not stances.onsets[-1] <= stances.late_after:
-            onset = stances.onsets[-1]
-            self.get_logger().warning(f"stance ending at t = {truth.t:.3f} s: " + (
+        stances.add(sample, self.robot.current_mode, self.runner.behind)
+        if stances.stances > closed and not stances.onsets[-1] <= SAID_AFTER:
+            onset, behind = stances.onsets[-1], stances.behind
+            said = self.get_logger().info if onset <= stances.late_after else self.get_logger().warning
+            said(f"stance ending at t = {truth.t:.3f} s: " + (
                 "no ramp torque reached the leg" if onset != onset else
-                f"the ramp torque reached the leg {onset * 1e3:.1f} ms after the touchdown"))
+                f"the ramp torque reached the leg {onset * 1e3:.1f} ms after the touchdown (the robot ran "
+                f"{behind * 1e3:.1f} ms behind its clock at most until then)"))
         for event in sample.events:
             if event.kind == "fall":
                 self.counters["falls"] += 1

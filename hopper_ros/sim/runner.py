@@ -67,6 +67,7 @@ class SimRunner:
         self._udp.bind(("127.0.0.1", 0))            # a sender on loopback only, not on 0.0.0.0
         port = udp_port if udp_port is not None else hardware.microcontroller.port
         self.udp_address = ("127.0.0.1", int(port))
+        self.behind = 0.0        # [s] how far behind its clock the last period ran (real-time mode)
         self.counters = {"periods": 0, "deadline_misses": 0, "resyncs": 0, "udp_errors": 0, "falls": 0, "strides": 0,
                          "throws": 0}          # falls, strides: counted by the caller, from the samples' events
         self._lock = threading.Lock()
@@ -130,6 +131,7 @@ class SimRunner:
                         self.drive.discard_syncs(late)
                     late = 0.0
                 catching_up = late > period
+                self.behind = late
             sample = self.robot.step(catching_up)
             self.robot.plant.events.clear()      # the sample holds them: the plant's history grew without end
             self.counters["periods"] += 1        #   (0.4 kB an event, 40k an hour: the soak's memory growth)

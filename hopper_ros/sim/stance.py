@@ -14,6 +14,7 @@ import math
 
 THRESHOLD = 0.5      # [N m] applied hip torque that counts as the ramp (the demo's tau_0: 8-12 N m)
 LATE_AFTER = 0.005   # [s] an onset later than this after the touchdown: the ramp was held
+SAID_AFTER = 0.002   # [s] an onset later than this is said in the log, with how far behind the robot ran
 KEEP_ONSETS = 1000   # onsets kept (the counters count them all)
 
 
@@ -27,15 +28,19 @@ class StanceTorque:
         self.onsets: list[float] = []  # [s] per stance (the last KEEP_ONSETS), NaN without torque
         self._touchdown = math.nan
         self._onset = math.nan
+        self.behind = 0.0              # [s] the most the robot ran behind its clock from the touchdown to the onset
 
-    def add(self, sample, current_mode: bool = True) -> None:
+    def add(self, sample, current_mode: bool = True, behind: float = 0.0) -> None:
         """One period of the simulated robot (sim.robot.SimSample): its events and applied torque;
-        `current_mode`: the drive was in current mode (SimRobot.current_mode)."""
+        `current_mode`: the drive was in current mode (SimRobot.current_mode); `behind`: how far behind
+        its clock the period ran (sim/runner.py; kept for each stance from the touchdown to the onset)."""
         for event in sample.events:
             if event.kind == "touchdown":
-                self._touchdown, self._onset = event.t, math.nan
+                self._touchdown, self._onset, self.behind = event.t, math.nan, 0.0
             elif event.kind in ("liftoff", "fall") and math.isfinite(self._touchdown):
                 self._close()
+        if math.isfinite(self._touchdown) and math.isnan(self._onset):
+            self.behind = max(self.behind, behind)
         if (current_mode and math.isfinite(self._touchdown) and math.isnan(self._onset)
                 and abs(sample.truth.hip_torque) > self.threshold):
             self._onset = sample.truth.t - self._touchdown

@@ -77,6 +77,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         if settings.master_node_id == self.node_id:
             raise ValueError(f"motor_driver: master_node_id {settings.master_node_id} is the drive's node id")
         self.counters = dict.fromkeys(COUNTER_NAMES, 0)
+        self.ramp_late_max = 0.0            # [s] the most of a ramp skipped because it came after its start
         self.events: list[tuple[int, str]] = []     # (level, text) for the caller's log; drained by it
         self._event_times: dict[str, float] = {}
         self.status = DriveStatus()
@@ -178,11 +179,15 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                     self._ramp = (setpoint, duration, start, stamp)
                     self._held = self.stillness.pending(now, stamp)
                     self._follows = self.stillness.covers(stamp)
+                    self._note_late_ramp(now, start, "the command came after its touchdown")
                 elif abs(stamp - self._ramp[3]) > RAMP_RESTAMP:
                     # the same ramp under a new stamp (the measured touchdown after a predicted one)
+                    began = self._ramp[2] <= now
                     self._ramp = (setpoint, duration, stamp + self.frozen_after(stamp, now), stamp)
                     self._held = self.stillness.pending(now, stamp)
                     self._follows = self.stillness.covers(stamp)
+                    if not began:
+                        self._note_late_ramp(now, self._ramp[2], "the touchdown came before its prediction")
                 self._current_ma = self._current_setting(self._ramp_torque(now))
             else:
                 self._position_qc = self._position_setting(setpoint)
@@ -420,6 +425,17 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
             self._event(WARN, f"the drive stood still for {settled * 1e3:.0f} ms ({settled / self.settings.sync_period:.0f} "
                               "SYNCs never answered: the simulated robot's process stopped?): the stance ramp "
                               "moved by that")
+
+    def _note_late_ramp(self, now: float, start: float, why: str) -> None:
+        """A ramp whose start had passed when it reached the driver: its first `now - start` are skipped,
+        and every ms of them moves the next apex by ~4 mm (docs/motor_driver.md). Counted and said, so
+        that a stride that misses its apex shows where its torque was lost."""
+        late = now - start
+        if late > self.settings.sync_period:
+            self.counters["ramps_begun_late"] += 1
+            self.ramp_late_max = max(self.ramp_late_max, late)
+            self._event(INFO, f"the stance ramp began {late * 1e3:.1f} ms after its touchdown ({why}): "
+                              "that much of its impulse lost")
 
     def _ramp_torque(self, now: float) -> float:
         """The ramp (2.32) averaged over the SYNC period this setting is held for: the drive holds each

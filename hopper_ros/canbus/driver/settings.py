@@ -19,6 +19,7 @@ COUNTER_NAMES = (
     "commands_received", "commands_rejected", "current_clamped", "malformed_frames",
     "sdo_aborts", "sdo_timeouts", "bus_errors", "emcy_received", "faults", "fault_resets",
     "watchdog_stops", "heartbeat_losses", "drive_bootups", "startup_failures", "ramp_held_syncs",
+    "ramps_begun_late",
 )
 
 INFO, WARN, ERROR = 0, 1, 2   # event / health levels (DiagnosticStatus OK, WARN, ERROR)
