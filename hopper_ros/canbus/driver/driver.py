@@ -38,7 +38,7 @@ from hopper_ros.canbus.epos2_objects import Command, OperationMode, State
 from hopper_ros.canbus.cia301.master import HeartbeatConsumer, SdoClient, heartbeat_frame, sync_frame
 from hopper_ros.runtime.gaps import GapHistogram
 from hopper_ros.hardware.config import HardwareConfig
-from hopper_ros.physics.laws import mean_ramp_torque
+from hopper_ros.physics.laws import mean_ramp_torque, ramp_impulse
 
 from . import cia402
 from .cia402 import FAULT_STATES, FaultReset
@@ -113,6 +113,10 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         self._sent_since_sync: tuple[int, bytes] | None = None
         # MODE_RAMP: (tau_0, duration, start, stamp): start = the stamp (or later) + the time the robot stood still
         self._ramp: tuple[float, float, float, float] | None = None
+        self._interrupted: tuple[float, float, float, float] | None = None   # the ramp a watchdog stop ended
+        self._owed = 0.0                    # [N m s] a late ramp's skipped impulse, still to give (_ramp_setting)
+        self._extra = 0.0                   # [N m] the part of this SYNC period's setting that gives it
+        self._torque_limit = abs(self.units.torque(self.units.current_limit - 0.001))   # [N m] 1 mA inside the limit
         self._last_rpdo: tuple[int, bytes] | None = None   # the last RPDO sent and when
         self._last_rpdo_time = -math.inf
         self._tpdo_seen = 0                 # TPDOs received since the last SYNC (bit n-1: TPDO n)
@@ -164,6 +168,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         if mode == MODE_DISABLED:
             self._want_enabled = False
             self._quick_stop = False
+            self._interrupted = None
             if self.status.state in FAULT_STATES and not self._reset.armed:
                 self._reset.arm()                       # the command stream acknowledges the fault
         else:
@@ -172,6 +177,11 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                 self._current_ma = self._current_setting(setpoint)
             elif mode == MODE_RAMP:
                 stamp = now - age                      # the command's stamp on this clock
+                if self._ramp is None and self._interrupted is not None and self._interrupted[:2] == (setpoint,
+                                                                                                       duration):
+                    # the ramp a watchdog stop ended, commanded again: it goes on at its own phase (started
+                    # anew from max_ramp_age back, the stance got its first part twice: 1.03 cm, bench round 14)
+                    self._ramp = self._interrupted
                 if self._ramp is None or self._ramp[:2] != (setpoint, duration):
                     # anchored at its stamp (the touchdown, or one predicted ahead: zero current until
                     # then), unless the command came late: a ramp skipped is energy lost
@@ -188,11 +198,12 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                     self._follows = self.stillness.covers(stamp)
                     if not began:
                         self._note_late_ramp(now, self._ramp[2], "the touchdown came before its prediction")
-                self._current_ma = self._current_setting(self._ramp_torque(now))
+                self._current_ma = self._current_setting(self._ramp_setting(now))
             else:
                 self._position_qc = self._position_setting(setpoint)
             if mode != MODE_RAMP:
                 self._ramp = None
+            self._interrupted = None
         if self.phase is Phase.RUNNING:
             self._send_rpdo(now, force=True)
         return True
@@ -254,7 +265,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
             return False
         self._want_enabled, self._quick_stop = False, True
         self._watchdog_at = now
-        self._current_ma, self._ramp = 0, None           # the current command zeroed at once
+        self._current_ma, self._ramp, self._interrupted = 0, None, self._ramp   # the current zeroed at once
         self.counters["watchdog_stops"] += 1
         self._event(WARN, f"no motor command for {(now - self._last_command) * 1e3:.1f} ms: current zeroed, "
                           "quick stop, then disable")
@@ -427,29 +438,46 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                               "moved by that")
 
     def _note_late_ramp(self, now: float, start: float, why: str) -> None:
-        """A ramp whose start had passed when it reached the driver: its first `now - start` are skipped,
-        and every ms of them moves the next apex by ~4 mm (docs/motor_driver.md). Counted and said, so
-        that a stride that misses its apex shows where its torque was lost."""
+        """A ramp whose start had passed when it reached the driver: its first `now - start` were not given.
+        Skipped, every ms of them moved the next apex by ~4 mm; that impulse is given as soon as the current
+        limit allows (`_ramp_setting`; 2 ms late: ~1 mm). More than a SYNC period late is counted and said,
+        so that a stride that misses its apex shows where its torque was late."""
         late = now - start
+        tau_0, duration = self._ramp[:2]
+        self._owed = ramp_impulse(late, float(tau_0), float(duration)) if late > 0.0 else 0.0
+        self._extra = 0.0
         if late > self.settings.sync_period:
             self.counters["ramps_begun_late"] += 1
             self.ramp_late_max = max(self.ramp_late_max, late)
             self._event(INFO, f"the stance ramp began {late * 1e3:.1f} ms after its touchdown ({why}): "
-                              "that much of its impulse lost")
+                              "that part of its impulse given as the current limit allows")
 
-    def _ramp_torque(self, now: float) -> float:
+    def _ramp_setting(self, now: float, at_sync: bool = False) -> float:
         """The ramp (2.32) averaged over the SYNC period this setting is held for: the drive holds each
         current until the next RPDO, so the period in which the touchdown falls gets its share of tau_0
         and every period the impulse the ramp gives there (sampled at `now`, the share was lost or
-        not by where the touchdown fell between two SYNCs: up to 1 ms of onset, 0.1 cm of apex)."""
+        not by where the touchdown fell between two SYNCs: up to 1 ms of onset, 0.1 cm of apex). Plus,
+        of a late ramp's skipped impulse (`_owed`), what the current limit leaves room for in this SYNC
+        period: chosen and booked `at_sync` (the period's RPDO, held a whole period), kept by a command's
+        RPDO within the period."""
         tau_0, duration, start = self._ramp[:3]
         since = float(now - start)
-        return mean_ramp_torque(since, since + self.settings.sync_period, float(tau_0), float(duration))
+        period = self.settings.sync_period
+        torque = mean_ramp_torque(since, since + period, float(tau_0), float(duration))
+        if at_sync:
+            self._extra = 0.0
+            if self._owed * torque > 0.0:          # owed, and of the ramp's sign (given already once it flips)
+                room = max(0.0, self._torque_limit - abs(torque))
+                self._extra = math.copysign(min(abs(self._owed) / period, room), self._owed)
+                self._owed -= self._extra * period
+            else:
+                self._owed = 0.0
+        return torque + self._extra
 
-    def _rpdo_frame(self, number: int, controlword: int) -> can.Message:
+    def _rpdo_frame(self, number: int, controlword: int, at_sync: bool = False) -> can.Message:
         if number == 1:
             if self._mode == MODE_RAMP and self._ramp is not None:
-                self._current_ma = self._current_setting(self._ramp_torque(self.clock()))
+                self._current_ma = self._current_setting(self._ramp_setting(self.clock(), at_sync))
             setting = self._current_ma if (self._want_enabled and self._mode in (MODE_CURRENT, MODE_RAMP)) else 0
             values = (controlword, OperationMode.CURRENT, setting)
         else:
@@ -460,7 +488,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
     def _send_rpdo(self, now: float, force: bool) -> None:
         controlword = int(self._controlword(now))
         number = 2 if self._mode == MODE_POSITION else 1
-        frame = self._rpdo_frame(number, controlword)
+        frame = self._rpdo_frame(number, controlword, at_sync=not force)
         key = (number, bytes(frame.data))
         if not force and (self._sent_since_sync == key or (
                 key == self._last_rpdo and now - self._last_rpdo_time < self.settings.rpdo_refresh)):
