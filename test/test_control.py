@@ -149,34 +149,6 @@ def test_a_pre_touchdown_heard_ahead_lets_the_leg_go_at_its_time_not_when_heard(
     assert policy.phase is Phase.PRE_TOUCHDOWN
 
 
-def test_a_robot_that_stands_still_before_its_pre_touchdown_instant_is_let_go_that_much_later():
-    """The pre-touchdown event came 15 ms ahead, and the robot stood still 100 ms before reaching its instant
-    (the simulated robot's process stopped): the leg is held while the drive is silent and let go at the
-    event's instant on the robot's clock, the stand-still later, in the driver's count or in the stamps once
-    they re-anchor. Let go on the host's clock, the leg swung free for the rest of the flight and touched down
-    5 mrad short (bench round 16: 0.58 cm)."""
-    from hopper_ros.control.stride_policy import StridePolicy
-
-    control = load_control()
-    policy = StridePolicy(DeadbeatController(load_params(), control.deadbeat), control.stride)
-    policy.on_setpoint(0.39, 2.0)
-    decision = policy.on_apex(0.39, 2.0, 1)
-    policy.on_sensing(0.0)
-    policy.on_clock(5.0)
-    pre_touchdown, stood = 0.2, 0.1
-    z = 0.205 * math.cos(decision.touchdown_angle) + 0.02
-    policy.on_pre_touchdown(pre_touchdown, z, -1.7, decision.touchdown_angle, 0.0)   # heard at 0.185
-    policy.on_drive_silence(True, 0.0)                   # 10 ms later the robot stands still
-    for now in (pre_touchdown, pre_touchdown + 0.05):
-        policy.on_sensing(now)
-        assert policy.command(now).mode == MODE_POSITION and policy.phase is Phase.POSITIONING
-    policy.on_drive_silence(False, stood)                # it runs again: the driver counted 100 ms
-    policy.on_sensing(pre_touchdown + stood - 0.001)
-    assert policy.command(pre_touchdown + stood - 0.001).mode == MODE_POSITION
-    assert policy.command(pre_touchdown + stood + 0.0005).mode != MODE_POSITION
-    assert policy.phase is Phase.PRE_TOUCHDOWN
-
-
 def test_the_ramps_instants_follow_the_sensing_clock_when_it_re_anchors():
     """The robot stood still 80 ms after a pre-touchdown event (the simulated robot's process stopped):
     the sensing clock re-anchors by that time, and the next event's state says so (its stamp minus its

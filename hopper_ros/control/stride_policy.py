@@ -165,21 +165,12 @@ class StridePolicy:
         its executor does), and the ramp is scheduled from then at the predicted touchdown. So an
         event that reaches the controller late by less than the lead costs nothing (acted on when
         heard, 1 ms ahead, it sent the ramp late under a real-time load beside the loop: its torque
-        reached the leg 5.4 ms after a touchdown). The instant is kept on the robot's clock, like the
-        ramp's: a robot that stands still before it reaches it is let go that much later (let go on the
-        host's clock, the leg of a stalled simulated robot swung free for the rest of its flight and touched
-        down 5 mrad short: 0.58 cm, bench round 16)."""
-        self._release_at = time - self._stood_still
+        reached the leg 5.4 ms after a touchdown)."""
+        self._release_at = time
         self._predicted_touchdown = time - self._stood_still + self.time_to_touchdown(
             z, z_dot, leg_angle, leg_angle_rate) if self.settings.ramp_ahead else math.nan
         self._frozen_at_prediction, self._stood_still_at_prediction = self._frozen_time, self._stood_still
         self._cancelled_ramp = False
-
-    def _stood_still_since_prediction(self) -> float:
-        """[s] The robot's stand-still since the pre-touchdown event that the stamps do not carry yet: the
-        driver's count of it, less what the stamps re-anchored by since."""
-        return max(0.0, self._frozen_time - self._frozen_at_prediction
-                   - (self._stood_still - self._stood_still_at_prediction))
 
     def time_to_touchdown(self, z: float, z_dot: float, leg_angle: float, leg_angle_rate: float) -> float:
         """The flight (2.14) from this state until the toe meets the ground."""
@@ -263,7 +254,7 @@ class StridePolicy:
     def command(self, now: float, now_stamp: Any = None) -> Command:
         """The motor command for the instant `now`."""
         machine, s = self.machine, self.settings
-        if not self._drive_silent and now >= self._release_at + self._stood_still + self._stood_still_since_prediction():
+        if now >= self._release_at:
             self._release_at = math.inf
             machine.on_pre_touchdown()
         if (machine.phase not in (Phase.IDLE, Phase.INITIALISE, Phase.BRAKE) and now - self._sensed > s.sensing_timeout
@@ -298,7 +289,10 @@ class StridePolicy:
             return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, touchdown + stood_still,
                            stamp if stood_still_then == stood_still else None, offset)
         if phase is Phase.PRE_TOUCHDOWN and plan is not None and math.isfinite(self._predicted_touchdown):
-            deadline = self._predicted_touchdown + stood_still + s.touchdown_grace + self._stood_still_since_prediction()
+            # the stand-still since the prediction: in the stamps once they re-anchored, else the driver's count
+            frozen = max(0.0, self._frozen_time - self._frozen_at_prediction
+                         - (stood_still - self._stood_still_at_prediction))
+            deadline = self._predicted_touchdown + stood_still + s.touchdown_grace + frozen
             if now <= deadline or self._drive_silent:
                 # scheduled ahead: zero current until the predicted touchdown, then the ramp
                 return Command(MODE_RAMP, float(plan.tau_0), plan.ramp_duration, self._predicted_touchdown + stood_still,
