@@ -38,12 +38,13 @@ from hopper_ros.canbus.epos2_objects import Command, OperationMode, State
 from hopper_ros.canbus.cia301.master import HeartbeatConsumer, SdoClient, heartbeat_frame, sync_frame
 from hopper_ros.runtime.gaps import GapHistogram
 from hopper_ros.hardware.config import HardwareConfig
-from hopper_ros.physics.laws import mean_ramp_torque, ramp_impulse
+from hopper_ros.physics.laws import mean_ramp_torque
 
 from . import cia402
 from .cia402 import FAULT_STATES, FaultReset
 from .received import ReceivedFrames
 from .sequence import StartupAndShutdown
+from .skipped import SkippedImpulse
 from .settings import (COUNTER_NAMES, ERROR, INFO, MODE_CURRENT, MODE_DISABLED, MODE_NAMES, MODE_POSITION, MODE_RAMP,
                        WARN, DriveConfig, DriverSettings)
 from .startup import RPDO_MAPPINGS, TPDO_MAPPINGS
@@ -114,9 +115,8 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         # MODE_RAMP: (tau_0, duration, start, stamp): start = the stamp (or later) + the time the robot stood still
         self._ramp: tuple[float, float, float, float] | None = None
         self._interrupted: tuple[float, float, float, float] | None = None   # the ramp a watchdog stop ended
-        self._owed = 0.0                    # [N m s] a late ramp's skipped impulse, still to give (_ramp_setting)
-        self._extra = 0.0                   # [N m] the part of this SYNC period's setting that gives it
-        self._torque_limit = abs(self.units.torque(self.units.current_limit - 0.001))   # [N m] 1 mA inside the limit
+        self._skipped = SkippedImpulse(abs(self.units.torque(self.units.current_limit - 0.001)),   # 1 mA inside
+                                       settings.sync_period)
         self._last_rpdo: tuple[int, bytes] | None = None   # the last RPDO sent and when
         self._last_rpdo_time = -math.inf
         self._tpdo_seen = 0                 # TPDOs received since the last SYNC (bit n-1: TPDO n)
@@ -177,11 +177,8 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                 self._current_ma = self._current_setting(setpoint)
             elif mode == MODE_RAMP:
                 stamp = now - age                      # the command's stamp on this clock
-                if self._ramp is None and self._interrupted is not None and self._interrupted[:2] == (setpoint,
-                                                                                                       duration):
-                    # the ramp a watchdog stop ended, commanded again: it goes on at its own phase (started
-                    # anew from max_ramp_age back, the stance got its first part twice: 1.03 cm, bench round 14)
-                    self._ramp = self._interrupted
+                if self._ramp is None and self._interrupted and self._interrupted[:2] == (setpoint, duration):
+                    self._ramp = self._interrupted     # a ramp the watchdog stopped goes on at its own phase
                 if self._ramp is None or self._ramp[:2] != (setpoint, duration):
                     # anchored at its stamp (the touchdown, or one predicted ahead: zero current until
                     # then), unless the command came late: a ramp skipped is energy lost
@@ -438,14 +435,11 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                               "moved by that")
 
     def _note_late_ramp(self, now: float, start: float, why: str) -> None:
-        """A ramp whose start had passed when it reached the driver: its first `now - start` were not given.
-        Skipped, every ms of them moved the next apex by ~4 mm; that impulse is given as soon as the current
-        limit allows (`_ramp_setting`; 2 ms late: ~1 mm). More than a SYNC period late is counted and said,
+        """A ramp whose start had passed when it reached the driver: the impulse of its first `now - start`
+        is given as the current limit allows (skipped.py). More than a SYNC period late is counted and said,
         so that a stride that misses its apex shows where its torque was late."""
         late = now - start
-        tau_0, duration = self._ramp[:2]
-        self._owed = ramp_impulse(late, float(tau_0), float(duration)) if late > 0.0 else 0.0
-        self._extra = 0.0
+        self._skipped.begin(late, float(self._ramp[0]), float(self._ramp[1]))
         if late > self.settings.sync_period:
             self.counters["ramps_begun_late"] += 1
             self.ramp_late_max = max(self.ramp_late_max, late)
@@ -456,23 +450,12 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         """The ramp (2.32) averaged over the SYNC period this setting is held for: the drive holds each
         current until the next RPDO, so the period in which the touchdown falls gets its share of tau_0
         and every period the impulse the ramp gives there (sampled at `now`, the share was lost or
-        not by where the touchdown fell between two SYNCs: up to 1 ms of onset, 0.1 cm of apex). Plus,
-        of a late ramp's skipped impulse (`_owed`), what the current limit leaves room for in this SYNC
-        period: chosen and booked `at_sync` (the period's RPDO, held a whole period), kept by a command's
-        RPDO within the period."""
+        not by where the touchdown fell between two SYNCs: up to 1 ms of onset, 0.1 cm of apex); plus what
+        a late ramp still owes (skipped.py, chosen `at_sync`)."""
         tau_0, duration, start = self._ramp[:3]
         since = float(now - start)
         period = self.settings.sync_period
-        torque = mean_ramp_torque(since, since + period, float(tau_0), float(duration))
-        if at_sync:
-            self._extra = 0.0
-            if self._owed * torque > 0.0:          # owed, and of the ramp's sign (given already once it flips)
-                room = max(0.0, self._torque_limit - abs(torque))
-                self._extra = math.copysign(min(abs(self._owed) / period, room), self._owed)
-                self._owed -= self._extra * period
-            else:
-                self._owed = 0.0
-        return torque + self._extra
+        return self._skipped.setting(mean_ramp_torque(since, since + period, float(tau_0), float(duration)), at_sync)
 
     def _rpdo_frame(self, number: int, controlword: int, at_sync: bool = False) -> can.Message:
         if number == 1:
