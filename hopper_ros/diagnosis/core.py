@@ -36,6 +36,7 @@ from .rounds import Log, restarts, revisit, rounds
 from .search import Search
 from .settings import Settings, load_settings  # noqa: F401  (the engine's settings, read here by callers)
 from .simulate import Variant, simulate_variants
+from .unused import find_unused_law, rescaled
 from .yardstick import locate_by_trajectory, noise_floor, start_moves
 
 
@@ -71,6 +72,16 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     if not left.explained:      # what the accepted effects leave may depend on the leg angle or its reversals
         progress.say("the leg angle's periodic dependence and the direction since the last reversal")
         found = _with_angle_law(search, chosen, model)
+        if found is not None:
+            chosen = found
+            state = _accepted(search, chosen, log, model, base_sim["series"], moves)
+            drifts = find_drift(data, state.current, settings)[:1]
+            after, residual_location = (drifts[0].after if drifts else state.after), state.residual_location
+            left = completeness(model.errors, after, floor, residual_location, settings)
+    if not left.explained:      # ... or on the boom's angle, or on the leg's compression since its last reversal
+        progress.say("the boom's angle and the leg's compression since its last reversal")
+        scaled, scaled_model = rescaled(search, base_sim["series"], moves)
+        found = _with_angle_law(scaled, chosen, scaled_model, find_unused_law)
         if found is not None:
             chosen = found
             state = _accepted(search, chosen, log, model, base_sim["series"], moves)
@@ -163,8 +174,9 @@ def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drif
     return kept, variant, found
 
 
-def _with_angle_law(search: Search, chosen: list[Scored], model: Reference):
-    """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`) beside them all,
+def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find=find_angle_law):
+    """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`; or of the boom's
+    angle and the leg's reversals, `unused.find_unused_law`, on its search and model reference) beside them all,
     and in place of each of them (that one may have stood in for it: plant B's backlash was named an actuator lag),
     each earlier effect revisited beside the law. Of the sets found, the smallest whose held-out fit is not clearly
     worse (paired t below `tie_t`, the sum of E_p, E_v, E_t not worse by `apex_tolerance`) than the best's; one found
@@ -176,7 +188,7 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference):
         kept = copy.deepcopy([r for k, r in enumerate(chosen) if k != left_out])    # a trial moves magnitudes
         locations, sets = locate(data, search.stack(kept).variant())
         located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
-        top = find_angle_law(search, kept, search.held_out(kept) if kept else model, sets, located)
+        top = find(search, kept, search.held_out(kept) if kept else model, sets, located)
         if top is None:
             continue
         trial = kept + [top]
