@@ -38,8 +38,8 @@ class Hysteresis:
                 f"a spring seat or elastomer; {2 * force:.3g} N between loading and unloading)")
 
     def terms(self) -> list:
-        return [("F_h q", 1.0, "hysteresis in the leg force (q: a Bouc-Wen state)", "N"),
-                ("x_y", self.yield_deflection, "the compression over which it turns after a reversal", "m")]
+        return [(f"q (Bouc-Wen, x_y = {self.yield_deflection:.4g} m)", 1.0,
+                 "hysteresis in the leg force: F_h times the state q in [-1, 1]", "N")]
 
 
 def yields(settings) -> np.ndarray:
