@@ -59,7 +59,8 @@ class Eccentricity:
     def words(self, scale: float = 1.0) -> str:
         return (f"the forward position's encoder reads wrong by an error periodic in the boom's angle, "
                 f"+-{1e3 * scale * self.amplitude:.3g} mm every {self.period:.3g} m of track ({self.laps()}); "
-                f"the forward speed read is wrong by up to {100 * scale * self.amplitude * 2 * math.pi / self.period:.2g} %")
+                f"the forward speed read is wrong by up to "
+                f"{100 * scale * self.amplitude * 2 * math.pi / self.period:.2g} %")
 
     def terms(self) -> list:
         symbol = f"2 pi y/{self.period:.4g}"

@@ -74,7 +74,8 @@ LIMITS = {
     "angle_scan": {"ge": 2}, "motor_harmonics": _COUNT, "ripple_cycles": {"gt": 0}, "gear_ratio": {"ge": 0},
     "backlash_max": {"gt": 0, "le": 0.5, "unit": "rad"},
     "azimuth_scan": {"ge": 3}, "azimuth_harmonics": {"ge": 1}, "hysteresis_yields": _COUNT,
-    "hysteresis_yield_min": {"gt": 0, "le": 0.1, "unit": "m"}, "hysteresis_yield_max": {"gt": 0, "le": 0.1, "unit": "m"},
+    "hysteresis_yield_min": {"gt": 0, "le": 0.1, "unit": "m"},
+    "hysteresis_yield_max": {"gt": 0, "le": 0.1, "unit": "m"},
 }
 
 

@@ -171,7 +171,8 @@ def active(c: Coefficients) -> frozenset:
 # the coefficients whose law is skipped where they are 0 (`is_on`); ground_friction is on where finite, and a
 # `*_terms` field where any of its coefficients is not 0
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "spring_cubic", "spring_preload",
-         "quadratic_damping", "leg_friction", "leg_hysteresis", "hip_viscous", "hip_friction", "hip_ripple_sin", "hip_ripple_cos",
+         "quadratic_damping", "leg_friction", "leg_hysteresis", "hip_viscous", "hip_friction", "hip_ripple_sin",
+         "hip_ripple_cos",
          "ground_stiffness", "rotor_inertia")
 
 
