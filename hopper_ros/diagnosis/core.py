@@ -36,7 +36,7 @@ from .rounds import Log, restarts, revisit, rounds
 from .search import Search
 from .settings import Settings, load_settings  # noqa: F401  (the engine's settings, read here by callers)
 from .simulate import Variant, simulate_variants
-from .unused import find_unused_law, rescaled
+from .unused import find_unused_law, refitted, rescaled
 from .yardstick import locate_by_trajectory, noise_floor, start_moves
 
 
@@ -81,7 +81,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     if not left.explained:      # ... or on the boom's angle, or on the leg's compression since its last reversal
         progress.say("the boom's angle and the leg's compression since its last reversal")
         scaled, scaled_model = rescaled(search, base_sim["series"], moves)
-        found = _with_angle_law(scaled, chosen, scaled_model, find_unused_law, floor)
+        found = _with_angle_law(scaled, chosen, scaled_model, find_unused_law, floor, refitted)
         if found is not None:
             chosen = found
             state = _accepted(search, chosen, log, model, base_sim["series"], moves)
@@ -175,7 +175,7 @@ def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drif
 
 
 def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find=find_angle_law,
-                    floor: Errors | None = None):
+                    floor: Errors | None = None, refit=None):
     """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`; or of the boom's
     angle and the leg's reversals, `unused.find_unused_law`, on its search and model reference) beside them all,
     and in place of each of them (that one may have stood in for it: plant B's backlash was named an actuator lag),
@@ -187,6 +187,8 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     passes its guards."""
     settings, data = search.settings, search.data
     accepted, found = (search.held_out(chosen) if chosen else model), []
+    if refit is not None:       # the accepted effects refitted on this search's yardstick (`unused.refitted`)
+        accepted = refit(search, chosen, accepted)
     for left_out in [None] + list(range(len(chosen))):
         kept = copy.deepcopy([r for k, r in enumerate(chosen) if k != left_out])    # a trial moves magnitudes
         locations, sets = locate(data, search.stack(kept).variant())
