@@ -5,8 +5,8 @@ nor the issues, with 13 mechanisms outside the library's families (issue 28).
     python bench/plant_c_suite.py FOLDER [names...]      (FOLDER from test/plant_c/suite.py)
 
 Per concealed mechanism, one of:
-- by mechanism: an accepted effect that is the same law, its magnitude within 25 % (`SAME`; today the library
-  holds none of plant C's laws, so this counts only what a later engine names by mechanism);
+- by mechanism: an accepted effect that is the same law, its magnitude within 25 % (`SAME`: the engine's laws of
+  the leg's hysteresis and of the azimuth encoder's periodic error, added after the first score);
 - look-alike: the nearest library law, or discovered terms at a site where the mechanism acts (`NEAR`);
 - missed.
 An accepted effect matching no concealed mechanism is a false verdict; a clean recording is flagged when
@@ -48,6 +48,10 @@ NEAR = {
 }
 # plant-C mechanism -> {the name an engine would give its own law: converter of plant C's magnitude}
 SAME: dict = {mechanism: {} for mechanism in NEAR}
+# the engine's laws of what the model does not use (`diagnosis.unused`), each the mechanism's own law in plant C's
+# magnitude: the leg force's Bouc-Wen hysteresis bound k_h x_y [N]; the azimuth encoder's eccentricity e [m]
+SAME["spring_hysteresis"] = {"leg_hysteresis": lambda m: m}
+SAME["azimuth_eccentricity"] = {"y_periodic": lambda m: m}
 # plant-C mechanism -> the forms of a dependence on the track position (`diagnosis.dependence`) that are its law
 # (by mechanism) and those that are its floor alone (look-alike)
 DEPENDENCES = {"floor_board": ({"board"}, set()), "tilted_pivot": ({"tilt"}, {"wave"})}

@@ -32,6 +32,7 @@ CASES = [
     ("liftoff_window", 0.0, "diagnosis.liftoff_window: must be > 0 s, got 0"),
     ("backlash_max", 0.0, "diagnosis.backlash_max: must be > 0 rad, got 0"),
     ("angle_scan", 1, "diagnosis.angle_scan: must be >= 2, got 1"),
+    ("hysteresis_yield_min", 0.0, "diagnosis.hysteresis_yield_min: must be > 0 m, got 0"),
     ("min_tt", 3.0, "diagnosis.min_tt: unknown key; known here: folds, grid, min_strides"),
 ]
 

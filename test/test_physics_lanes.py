@@ -39,6 +39,8 @@ def _variants() -> list[laws.Coefficients]:
     out.append(effects.apply(base, {"ground_compliance": 4e4, "actuator_lag": 0.004, "hip_dry_friction": 0.05,
                                     "toe_slip": 0.5})[0])
     out += [base.replace(track_gravity=a) for a in (0.13, -0.13)]     # a tilted boom axis (diagnosis.dependence)
+    # a Bouc-Wen hysteresis in the leg force (diagnosis.unused), a state of the lanes
+    out += [base.replace(leg_hysteresis=f, leg_hysteresis_yield=x) for f, x in ((3.0, 0.002), (10.0, 0.0005))]
     return out
 
 

@@ -182,6 +182,13 @@ def backlash_candidate(settings, quantum: float) -> Candidate:
                      equation="theta_meas = clamp(theta_meas_prev, theta - b/2, theta + b/2)")
 
 
+def _best(search: Search, stack, candidates: list[Candidate], current: Reference) -> Candidate:
+    """Of one law's variants (periods, yields), the one whose search reduces the held-out residual most."""
+    trial = search.search(stack, [dataclasses.replace(c, name=f"{c.name}_{k}") for k, c in enumerate(candidates)],
+                          current)
+    return candidates[int(max(trial, key=lambda r: r.reduction).name.split("_")[-1])]
+
+
 def find_angle_law(search: Search, chosen: list[Scored], current: Reference, sets, located: set) -> Scored | None:
     """The backlash, or the ripple where the hip is located, where it wins a round beside the accepted effects
     (refitted beside it) against the library's effects (screened as in a round; a sensor fault by the sensor
@@ -192,14 +199,21 @@ def find_angle_law(search: Search, chosen: list[Scored], current: Reference, set
     stack = search.stack(chosen)
     ripples = find_ripple(sets, settings, gear_ratio(settings)) if SITE in located else []
     if ripples:      # the period the trajectories fit best
-        trial = search.search(stack, [dataclasses.replace(ripple_candidate(r), name=f"hip_ripple_{k}")
-                                      for k, r in enumerate(ripples)], current)
-        laws.append(ripple_candidate(ripples[int(max(trial, key=lambda r: r.reduction).name.split("_")[-1])]))
+        laws.append(_best(search, stack, [ripple_candidate(r) for r in ripples], current))
+    return win_round(search, chosen, current, laws, located, "the leg angle and its reversals")
+
+
+def win_round(search: Search, chosen: list[Scored], current: Reference, laws: list[Candidate],
+              located: set, what: str) -> Scored | None:
+    """The best of `laws` where it wins a round beside the accepted effects `chosen` against the library's effects
+    (screened as in a round), polished beside them; None where a library effect wins or nothing passes."""
+    settings = search.settings
+    stack = search.stack(chosen)
     taken = {r.name for r in chosen}
     excited = {"command": float(np.max(np.abs(search.data.strides.tau_0), initial=0.0))}
     rivals = search.screen(stack, [library_candidate(e, stack.variant().coefficients, excited)
                                    for e in library.LIBRARY + library.SENSORS if e.name not in taken], located)
-    search.progress.say(f"the leg angle and its reversals: {len(laws)} laws against {len(rivals)} library effects")
+    search.progress.say(f"{what}: {len(laws)} laws against {len(rivals)} library effects")
     ranking = search.search(stack, laws + rivals, current)
     top, ties = acceptance.choose(ranking, settings)
     if top is None or top.name not in {c.name for c in laws}:

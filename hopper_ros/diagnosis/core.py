@@ -30,12 +30,13 @@ from .drift import find_drift
 from .locate import Location, fit_locations, locate
 from .lookalikes import discovered_look_alikes, fit_secondary
 from .progress import QUIET, Progress
-from .records import Diagnosis, Errors, Reference, Scored, completeness
+from .records import APEX_ERRORS, Diagnosis, Errors, Reference, Scored, completeness
 from .report import verdict
 from .rounds import Log, restarts, revisit, rounds
 from .search import Search
 from .settings import Settings, load_settings  # noqa: F401  (the engine's settings, read here by callers)
 from .simulate import Variant, simulate_variants
+from .unused import find_unused_law, refitted, rescaled
 from .yardstick import locate_by_trajectory, noise_floor, start_moves
 
 
@@ -71,6 +72,16 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     if not left.explained:      # what the accepted effects leave may depend on the leg angle or its reversals
         progress.say("the leg angle's periodic dependence and the direction since the last reversal")
         found = _with_angle_law(search, chosen, model)
+        if found is not None:
+            chosen = found
+            state = _accepted(search, chosen, log, model, base_sim["series"], moves)
+            drifts = find_drift(data, state.current, settings)[:1]
+            after, residual_location = (drifts[0].after if drifts else state.after), state.residual_location
+            left = completeness(model.errors, after, floor, residual_location, settings)
+    if not left.explained:      # ... or on the boom's angle, or on the leg's compression since its last reversal
+        progress.say("the boom's angle and the leg's compression since its last reversal")
+        scaled, scaled_model = rescaled(search, base_sim["series"], moves)
+        found = _with_angle_law(scaled, chosen, scaled_model, find_unused_law, floor, refitted)
         if found is not None:
             chosen = found
             state = _accepted(search, chosen, log, model, base_sim["series"], moves)
@@ -163,20 +174,26 @@ def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drif
     return kept, variant, found
 
 
-def _with_angle_law(search: Search, chosen: list[Scored], model: Reference):
-    """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`) beside them all,
+def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find=find_angle_law,
+                    floor: Errors | None = None, refit=None):
+    """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`; or of the boom's
+    angle and the leg's reversals, `unused.find_unused_law`, on its search and model reference) beside them all,
     and in place of each of them (that one may have stood in for it: plant B's backlash was named an actuator lag),
     each earlier effect revisited beside the law. Of the sets found, the smallest whose held-out fit is not clearly
-    worse (paired t below `tie_t`, the sum of E_p, E_v, E_t not worse by `apex_tolerance`) than the best's; one found
+    worse (paired t below `tie_t`, the sum of E_p, E_v, E_t not worse by `apex_tolerance`, or, given the noise
+    `floor`, each within `floor_factor` of it: an effect kept beside the law for a next apex already at the noise
+    floor is a stand-in, plant C's leg hysteresis beside a boom friction of 0.007 m/s^2) than the best's; one found
     in place of an effect only where it `replaces` the accepted set as a whole explanation. None where no law
     passes its guards."""
     settings, data = search.settings, search.data
     accepted, found = (search.held_out(chosen) if chosen else model), []
+    if refit is not None:       # the accepted effects refitted on this search's yardstick (`unused.refitted`)
+        accepted = refit(search, chosen, accepted)
     for left_out in [None] + list(range(len(chosen))):
         kept = copy.deepcopy([r for k, r in enumerate(chosen) if k != left_out])    # a trial moves magnitudes
         locations, sets = locate(data, search.stack(kept).variant())
         located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
-        top = find_angle_law(search, kept, search.held_out(kept) if kept else model, sets, located)
+        top = find(search, kept, search.held_out(kept) if kept else model, sets, located)
         if top is None:
             continue
         trial = kept + [top]
@@ -188,9 +205,14 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference):
     if not found:
         return None
     best = min(found, key=lambda f: f[0].sse.sum())[0]
+
+    def at_floor(errors):
+        return floor is not None and all(getattr(errors, k) <= settings.floor_factor * getattr(floor, k)
+                                         for k in APEX_ERRORS)
+
     alike = [(len(trial), held.sse.sum(), trial) for held, trial in found
              if acceptance.paired_t(held.sse, best.sse) < settings.tie_t
-             and held.errors.total <= best.errors.total * (1 + settings.apex_tolerance)]
+             and (held.errors.total <= best.errors.total * (1 + settings.apex_tolerance) or at_floor(held.errors))]
     return min(alike, key=lambda f: f[:2])[2]
 
 

@@ -118,7 +118,7 @@ def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients)
             command = laws.ramp_torque(since - float(c.torque_delay), tau_0, t_f)
             applied = laws.actuator_torque(c, command)
             f = laws.stance_forces(c, yy, zz, vy, vz, 0.0, toe_y, applied, command=command, theta_td=theta_td,
-                                   since_touchdown=since)
+                                   since_touchdown=since, hysteresis=_hysteresis(c, yy - toe_y, zz))
             ry, rz = m * (ay - f.ydd), m * (az - f.zdd)
             ry = ry * (1.0 + float(c.horizontal_mass_ratio))
             along = -f.sin * ry + f.cos * rz
@@ -359,6 +359,18 @@ def _locate(data: StrideData, variant: Variant) -> tuple[list[Location], tuple]:
         found.append(timing)
     found.sort(key=lambda loc: -loc.ratio)
     return found, sets
+
+
+def _hysteresis(c, dy: np.ndarray, hz: np.ndarray):
+    """The leg's hysteresis state (`laws.hysteresis_rate`) along a stance's recorded compression, from 0 at its first
+    sample (0 where the law is off)."""
+    if not laws.is_on(c, "leg_hysteresis"):
+        return 0.0
+    x = float(c.rest_length) - np.sqrt(dy * dy + hz * hz)
+    q = np.zeros_like(x)
+    for k in range(1, len(x)):
+        q[k] = float(np.clip(q[k - 1] + laws.hysteresis_rate(c, q[k - 1], x[k] - x[k - 1]), -1.0, 1.0))
+    return q
 
 
 def timing_location(data: StrideData, variant: Variant) -> Location | None:

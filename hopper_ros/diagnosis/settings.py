@@ -51,6 +51,11 @@ class Settings:
     ripple_cycles: float = 1.5       # ... the longest: the angle's recorded range over this
     gear_ratio: float = 0.0          # motor turns per leg turn (0: hardware.yaml's motor.gear_ratio)
     backlash_max: float = 0.03       # [rad] the widest backlash of the leg angle's encoder searched
+    azimuth_scan: int = 80           # periods of the frequency scan over the boom's angle (geometric) ...
+    azimuth_harmonics: int = 24      # ... from a lap over this to one lap
+    hysteresis_yields: int = 5       # yield deflections of the leg's hysteresis tried (geometric) ...
+    hysteresis_yield_min: float = 0.0005   # [m] ... from this ...
+    hysteresis_yield_max: float = 0.008    # [m] ... to this
 
 
 _SHARE = {"ge": 0, "le": 1}
@@ -68,6 +73,9 @@ LIMITS = {
     "explained_left_pct": {"ge": 0, "le": 100, "unit": "%"}, "secondary_grid": _COUNT,
     "angle_scan": {"ge": 2}, "motor_harmonics": _COUNT, "ripple_cycles": {"gt": 0}, "gear_ratio": {"ge": 0},
     "backlash_max": {"gt": 0, "le": 0.5, "unit": "rad"},
+    "azimuth_scan": {"ge": 3}, "azimuth_harmonics": {"ge": 1}, "hysteresis_yields": _COUNT,
+    "hysteresis_yield_min": {"gt": 0, "le": 0.1, "unit": "m"},
+    "hysteresis_yield_max": {"gt": 0, "le": 0.1, "unit": "m"},
 }
 
 

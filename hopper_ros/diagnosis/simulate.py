@@ -30,6 +30,16 @@ BATCH_LANES = 4000      # lanes per integration call (memory: 5 x lanes x sample
 KEPT_VARIANTS = 20000   # variants whose results a StrideData keeps (about 2 kB each for 50 strides)
 FIELDS = laws.Coefficients.scalar_names() + laws.Coefficients.term_names()
 BACKLASH = "theta_backlash"   # the sensors' key of the leg angle encoder's backlash [rad] (`backlash_reading`)
+# the sensors' keys of an error of the forward position's reading periodic in the boom's angle (`periodic_y`) [m, m, m]
+Y_PERIODIC = ("y_periodic_sin", "y_periodic_cos", "y_periodic_period")
+
+
+def periodic_y(y, a, b, period):
+    """(error, its slope d error/dy) of a forward-position reading y_meas = y + a sin(2 pi y/P) + b cos(2 pi y/P)
+    (an encoder's pulley or gear eccentric about its shaft, turning with the boom: periodic in the boom's angle)."""
+    k = 2.0 * np.pi / period
+    s, c = np.sin(k * y), np.cos(k * y)
+    return a * s + b * c, k * (a * c - b * s)
 
 
 def backlash_reading(theta: np.ndarray, start: np.ndarray, half: np.ndarray) -> np.ndarray:
@@ -138,15 +148,31 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
     theta_td = held + play * np.tile(hold_direction(data), nv)     # the reading lags the swing into the hold
     duration = data.duration + 0.02
     needed = None if keep_series else _needed_samples(data, sens, nv, int(np.floor(duration / 1e-3)) + 1)
-    res = lanes.simulate_lanes(coef, z0, np.tile(s.forward_speed, nv) / sens["y_scale"], theta_td,
+    periodic = np.array([[v.sensors.get(k, 0.0 if k != Y_PERIODIC[2] else 1.0) for k in Y_PERIODIC] for v in variants])
+    wavy = bool(np.any(periodic[:, :2] != 0.0))
+    speed_read = np.ones(nv * ns)
+    if wavy:        # the apex's place and speed as read: y_0 + e(y_0) and v_0 (1 + e'(y_0))
+        a, b, period = (np.repeat(periodic[:, k], ns) for k in range(3))
+        apex_read = np.tile(s.apex_y, nv)
+        y0 = apex_read - periodic_y(apex_read, a, b, period)[0]
+        e0, slope0 = periodic_y(y0, a, b, period)
+        speed_read = 1.0 + slope0
+    res = lanes.simulate_lanes(coef, z0, np.tile(s.forward_speed, nv) / sens["y_scale"] / speed_read, theta_td,
                                np.tile(s.tau_0, nv), np.tile(s.ramp_duration, nv), duration=duration, needed=needed)
     if np.any(play > 0.0):
         res = dataclasses.replace(res, theta=backlash_reading(res.theta, held, play))
+    length_read, next_speed_read = res.stride_length, 1.0
+    if wavy:        # the lanes' forward position (from the apex) as read: y + e(y_0 + y) - e(y_0)
+        lane_y = res.y.astype(float)
+        error = periodic_y(y0[:, None] + lane_y, a[:, None], b[:, None], period[:, None])[0]
+        res = dataclasses.replace(res, y=(lane_y + error - e0[:, None]).astype(res.y.dtype))
+        e1, slope1 = periodic_y(y0 + res.stride_length, a, b, period)
+        length_read, next_speed_read = res.stride_length + e1 - e0, 1.0 + slope1
     shape = (nv, ns)
     pred = {"height": res.next_apex_height.reshape(shape) * sens["z_scale"].reshape(shape) + sens["z_offset"].reshape(shape),
-            "speed": res.next_forward_speed.reshape(shape) * sens["y_scale"].reshape(shape),
+            "speed": (res.next_forward_speed * next_speed_read).reshape(shape) * sens["y_scale"].reshape(shape),
             "time": res.stride_time.reshape(shape),
-            "length": res.stride_length.reshape(shape) * sens["y_scale"].reshape(shape)}
+            "length": length_read.reshape(shape) * sens["y_scale"].reshape(shape)}
     if not keep_series and lanes.compiled_backend() is not None:
         from .compiled import trajectory_sse
         return {"sse": trajectory_sse(res, data, sens, rings, nv), "pred": pred}

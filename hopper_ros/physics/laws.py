@@ -96,6 +96,8 @@ class Coefficients:
     spring_preload: object = 0.0            # F_p [N]: + F_p (a spring preloaded against the leg's stop)
     quadratic_damping: object = 0.0         # d_2 [N s^2/m^2]: - d_2 |rho'| rho'
     leg_friction: object = 0.0              # F_c [N]: - F_c tanh(rho'/v_s)
+    leg_hysteresis: object = 0.0            # F_h [N]: + F_h q, q a Bouc-Wen element's state (`hysteresis_rate`)
+    leg_hysteresis_yield: object = 0.002    # x_y [m]: the compression over which q turns after a reversal
     ground_stiffness: object = 0.0          # k_g [N/m], 0 = rigid ground
     ground_damping: object = 250.0          # d_g [N s/m]
     ground_friction: object = math.inf      # mu [1]: the toe slides where |G_y| > mu G_z (inf: it never slips)
@@ -169,7 +171,8 @@ def active(c: Coefficients) -> frozenset:
 # the coefficients whose law is skipped where they are 0 (`is_on`); ground_friction is on where finite, and a
 # `*_terms` field where any of its coefficients is not 0
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "spring_cubic", "spring_preload",
-         "quadratic_damping", "leg_friction", "hip_viscous", "hip_friction", "hip_ripple_sin", "hip_ripple_cos",
+         "quadratic_damping", "leg_friction", "leg_hysteresis", "hip_viscous", "hip_friction", "hip_ripple_sin",
+         "hip_ripple_cos",
          "ground_stiffness", "rotor_inertia")
 
 
@@ -232,6 +235,18 @@ def leg_force(c: Coefficients, rho, rho_dot):
     return force
 
 
+def hysteresis_rate(c: Coefficients, q, compression_rate):
+    """The rate of the leg's hysteresis state q in [-1, 1] (`leg_hysteresis`: the force F_h q along the leg), a
+    Bouc-Wen element (Bouc 1967, Wen 1976; n = 1, beta = gamma = 1/2) in the compression x = rho_0 - rho:
+
+        x_y q' = x' - (|x'| q + x' |q|) / 2
+
+    rate-independent: after each reversal of the compression q turns over x_y (elastic, then saturating at
+    +-1 the way it moves), unlike a dry friction, which turns with the speed's sign. Reset to 0 at touchdown."""
+    return (compression_rate - 0.5 * (np.abs(compression_rate) * q + compression_rate * np.abs(q))) \
+        / c.leg_hysteresis_yield
+
+
 def hip_losses(c: Coefficients, theta, theta_dot):
     """Friction in the hip joint, -b theta' - f tanh(theta'/w_s), and a ripple periodic in the leg angle
     (a motor's cogging or a gear's eccentricity seen through the gear), a sin(2 pi theta/P) + b cos(2 pi theta/P),
@@ -253,11 +268,12 @@ StanceForces = namedtuple("StanceForces", [
     "torque",        # about the hip [N m], the applied torque plus hip losses and terms
     "depth_rate",    # toe sinking rate into a compliant ground [m/s]
     "toe_rate",      # the toe's forward sliding speed on a ground of finite friction [m/s]
-    "ydd", "zdd"])
+    "ydd", "zdd",
+    "hysteresis_rate"])     # the rate of the leg's hysteresis state (`hysteresis_rate`)
 
 
 def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, command=0.0, theta_td=0.0,
-                  since_touchdown=0.0, compliant=None) -> StanceForces:
+                  since_touchdown=0.0, compliant=None, hysteresis=0.0) -> StanceForces:
     """Stance dynamics (2.9) in Cartesian form about the toe at (toe_y, ground_height - depth).
 
         e_rho = (-sin theta, cos theta),   e_theta = (-cos theta, -sin theta)
@@ -265,7 +281,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
         m z'' =  F e_rho,z + (tau/rho) e_theta,z - m g
 
     F is `leg_force` plus the discovered along-the-leg terms, tau the applied torque plus `hip_losses` and
-    the discovered hip terms, r the horizontal mass ratio of the boom. A compliant ground holds the
+    the discovered hip terms, r the horizontal mass ratio of the boom; `hysteresis` the leg's hysteresis state q
+    (`leg_hysteresis`: + F_h q in F). A compliant ground holds the
     massless toe with k_g depth + d_g depth' = the force's vertical component; depth' enters rho'. On a
     ground of finite friction the toe slides (`toe_slip_rate`); its speed enters rho' the same way.
     `compliant` (per lane) defaults to ground_stiffness > 0.
@@ -283,6 +300,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
                                      torque, command, 0.0)
         tau = tau + sum_terms(hip_term, c.hip_terms, hip_context)
     spring_only = leg_force(c, rho, approach) + c.damping * approach     # the force's parts without d rho'
+    if is_on(c, "leg_hysteresis"):
+        spring_only = spring_only + c.leg_hysteresis * hysteresis
     if is_on(c, "leg_terms"):
         leg_context = stance_context(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown,
                                      tau, command, c.leg_knot)
@@ -305,7 +324,10 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     if is_on(c, "track_gravity"):
         ydd = ydd + c.track_gravity
     zdd = (force * cos - across * sin) / c.mass - c.gravity
-    return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, toe_rate, ydd, zdd)
+    q_rate = 0.0
+    if is_on(c, "leg_hysteresis"):
+        q_rate = hysteresis_rate(c, hysteresis, -rho_dot)
+    return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, toe_rate, ydd, zdd, q_rate)
 
 
 def rotor_torque(c: Coefficients, tau, force, sin, cos, rho, rho_dot, theta_dot):
