@@ -34,7 +34,7 @@ from hopper_ros.physics import effects as library
 from . import acceptance
 from .candidates import Candidate, library_candidate
 from .discover import FOLDS, site_residuals
-from .fitting import vertex
+from .periodic import scan_period
 from .records import Reference, Scored
 from .search import Search
 from .simulate import BACKLASH, Variant
@@ -106,20 +106,6 @@ def periods(theta: np.ndarray, gear: float, settings) -> np.ndarray:
     return np.geomspace(shortest, longest, settings.angle_scan)
 
 
-def _held_out(designs: list, residuals: list, fold: np.ndarray) -> np.ndarray:
-    """Per stride, the residual's SSE predicted by the least squares fitted on the other folds."""
-    out = np.zeros(len(designs))
-    gram = np.array([X.T @ X for X in designs])
-    rhs = np.array([X.T @ y for X, y in zip(designs, residuals)])
-    for k in np.unique(fold):
-        train = fold != k
-        coef = np.linalg.lstsq(gram[train].sum(axis=0), rhs[train].sum(axis=0), rcond=None)[0]
-        for i in np.flatnonzero(~train):
-            e = residuals[i] - designs[i] @ coef
-            out[i] = e @ e
-    return out
-
-
 def find_ripple(sets, settings, gear: float) -> list[Ripple]:
     """The period of the hip's residual in the leg angle that predicts held-out strides best (the vertex of the
     scan's held-out SSE about its least), where it beats a constant and a slope in the angle there (t >= `min_t`):
@@ -143,20 +129,9 @@ def find_ripple(sets, settings, gear: float) -> list[Ripple]:
             return np.column_stack([np.ones_like(th), th])
         return np.column_stack([np.sin(2 * np.pi * th / period), np.cos(2 * np.pi * th / period)])
 
-    plain = _held_out([design(th) for th, _ in strides], residuals, fold)
-    trials = [_held_out([design(th, p) for th, _ in strides], residuals, fold) for p in scan]
-    best = int(np.argmin([trial.sum() for trial in trials]))
-    t = acceptance.paired_t(plain, trials[best])
-    if not t >= settings.min_t:
-        return []
-    step = math.log(scan[1] / scan[0])
-    centre = math.exp(vertex(np.log(scan), np.array([trial.sum() for trial in trials])))
-    found = []
-    for period in centre * np.exp(step * np.array(NEAR)):
-        X = np.vstack([design(th, period) for th, _ in strides])
-        coef = np.linalg.lstsq(X, np.concatenate(residuals), rcond=None)[0]
-        found.append(Ripple(float(period), float(coef[0]), float(coef[1]), float(t), gear))
-    return found
+    found, t = scan_period(lambda period: [design(th, period) for th, _ in strides], residuals, fold, scan, NEAR,
+                           settings.min_t)
+    return [Ripple(period, sine, cosine, t, gear) for period, sine, cosine in found]
 
 
 def ripple_candidate(found: Ripple) -> Candidate:

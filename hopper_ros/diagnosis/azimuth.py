@@ -27,7 +27,7 @@ import numpy as np
 
 from .candidates import Candidate
 from .discover import FOLDS
-from .fitting import vertex
+from .periodic import scan_period
 from .simulate import Y_PERIODIC, Variant, periodic_y, simulate_variants
 
 NEAR = (-1.0, -0.5, 0.0, 0.5, 1.0)    # the periods tried by trajectory about the scan's best, in steps of the scan
@@ -114,22 +114,9 @@ def find_eccentricity(data, variant: Variant, settings, lap: float) -> list[Ecce
         return []
     fold = np.arange(len(strides)) % FOLDS
     residuals = [r for _, _, r in strides]
-    from . import acceptance
-    from .angle import _held_out       # (angle imports this module)
-    plain = _held_out([_design(y, y0, None) for y, y0, _ in strides], residuals, fold)
-    trials = [_held_out([_design(y, y0, p) for y, y0, _ in strides], residuals, fold) for p in scan]
-    best = int(np.argmin([trial.sum() for trial in trials]))
-    t = acceptance.paired_t(plain, trials[best])
-    if not t >= settings.min_t:
-        return []
-    step = math.log(scan[1] / scan[0])
-    centre = math.exp(vertex(np.log(scan), np.array([trial.sum() for trial in trials])))
-    found = []
-    for period in centre * np.exp(step * np.array(NEAR)):
-        X = np.vstack([_design(y, y0, period) for y, y0, _ in strides])
-        coef = np.linalg.lstsq(X, np.concatenate(residuals), rcond=None)[0]
-        found.append(Eccentricity(float(period), float(coef[0]), float(coef[1]), float(t), lap))
-    return found
+    found, t = scan_period(lambda period: [_design(y, y0, period) for y, y0, _ in strides], residuals, fold, scan,
+                           NEAR, settings.min_t)
+    return [Eccentricity(period, sine, cosine, t, lap) for period, sine, cosine in found]
 
 
 def eccentricity_candidate(found: Eccentricity) -> Candidate:

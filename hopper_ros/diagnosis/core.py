@@ -69,19 +69,19 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     floor = noise_floor(data, moves)
     residual_location = state.residual_location
     left = completeness(model.errors, after, floor, residual_location, settings)
-    if not left.explained:      # what the accepted effects leave may depend on the leg angle or its reversals
-        progress.say("the leg angle's periodic dependence and the direction since the last reversal")
-        found = _with_angle_law(search, chosen, model)
-        if found is not None:
-            chosen = found
-            state = _accepted(search, chosen, log, model, base_sim["series"], moves)
-            drifts = find_drift(data, state.current, settings)[:1]
-            after, residual_location = (drifts[0].after if drifts else state.after), state.residual_location
-            left = completeness(model.errors, after, floor, residual_location, settings)
-    if not left.explained:      # ... or on the boom's angle, or on the leg's compression since its last reversal
-        progress.say("the boom's angle and the leg's compression since its last reversal")
+    def unused_law():
         scaled, scaled_model = rescaled(search, base_sim["series"], moves)
-        found = _with_angle_law(scaled, chosen, scaled_model, find_unused_law, floor, refitted)
+        return _with_angle_law(scaled, chosen, scaled_model, find_unused_law, floor, refitted)
+
+    # what the accepted effects leave may depend on the leg angle or its reversals, or on the boom's angle, or on
+    # the leg's compression since its last reversal
+    for words, stage in (("the leg angle's periodic dependence and the direction since the last reversal",
+                          lambda: _with_angle_law(search, chosen, model)),
+                         ("the boom's angle and the leg's compression since its last reversal", unused_law)):
+        if left.explained:
+            break
+        progress.say(words)
+        found = stage()
         if found is not None:
             chosen = found
             state = _accepted(search, chosen, log, model, base_sim["series"], moves)
