@@ -157,7 +157,7 @@ def backlash_candidate(settings, quantum: float) -> Candidate:
                      equation="theta_meas = clamp(theta_meas_prev, theta - b/2, theta + b/2)")
 
 
-def _best(search: Search, stack, candidates: list[Candidate], current: Reference) -> Candidate:
+def best_candidate(search: Search, stack, candidates: list[Candidate], current: Reference) -> Candidate:
     """Of one law's variants (periods, yields), the one whose search reduces the held-out residual most."""
     trial = search.search(stack, [dataclasses.replace(c, name=f"{c.name}_{k}") for k, c in enumerate(candidates)],
                           current)
@@ -174,7 +174,7 @@ def find_angle_law(search: Search, chosen: list[Scored], current: Reference, set
     stack = search.stack(chosen)
     ripples = find_ripple(sets, settings, gear_ratio(settings)) if SITE in located else []
     if ripples:      # the period the trajectories fit best
-        laws.append(_best(search, stack, [ripple_candidate(r) for r in ripples], current))
+        laws.append(best_candidate(search, stack, [ripple_candidate(r) for r in ripples], current))
     return win_round(search, chosen, current, laws, located, "the leg angle and its reversals")
 
 

@@ -21,7 +21,7 @@ import dataclasses
 import numpy as np
 
 from . import hysteresis
-from .angle import _best, win_round
+from .angle import best_candidate, win_round
 from .azimuth import eccentricity_candidate, find_eccentricity
 from .candidates import Candidate
 from .dependence import lap_length
@@ -81,9 +81,9 @@ def find_unused_law(search: Search, chosen: list[Scored], current: Reference, se
     laws = []
     eccentric = find_eccentricity(search.data, stack.variant(), settings, lap_length(settings))
     if eccentric:       # the period the trajectories fit best
-        laws.append(_best(search, stack, [eccentricity_candidate(e) for e in eccentric], current))
-    laws.append(_best(search, stack, [hysteresis.hysteresis_candidate(x) for x in hysteresis.yields(settings)],
-                      current))
+        laws.append(best_candidate(search, stack, [eccentricity_candidate(e) for e in eccentric], current))
+    yields = hysteresis.yields(settings)
+    laws.append(best_candidate(search, stack, [hysteresis.hysteresis_candidate(x) for x in yields], current))
     return win_round(search, chosen, current, laws, located, WHAT)
 
 
