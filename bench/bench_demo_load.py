@@ -12,7 +12,8 @@ health.json (the nodes' diagnostics from the throw on, hopper_ros/cli/demo.py): 
 |apex error| past each setpoint's first stride, the states that reached the event detector more
 than 1 ms after their sample, the stance ramps the controller cancelled, the stances in which the
 leg felt no ramp torque or felt it more than 5 ms after the touchdown (hopper_ros/sim/stance.py),
-the motor command stream's gaps at the driver (p99 over the run, the longest), its watchdog
+the ramps that reached the driver after their start and by how much, the predicted touchdowns
+against the measured (both on the robot's clock), the motor command stream's gaps at the driver (p99 over the run, the longest), its watchdog
 stops, the simulated robot's freezes (stalls past sim/runner.py RESYNC_AFTER) with the SYNCs its
 drive never answered and the time the driver counted the robot standing still from them. The runs' folders (launch.log of every node, strides, health) stay in
 bench/out/demo_load/; runs.jsonl has one line per run.

@@ -265,7 +265,7 @@ def loop_health(health: dict, at_throw: dict | None = None, gap_max: dict | None
         "command_timeout_ms": 1e3 * value("motor_driver", "command_timeout_s"),
         "watchdog_stops": value("motor_driver", "watchdog_stops"),
         "ramp_held_syncs": value("motor_driver", "ramp_held_syncs"),
-        "ramps_begun_late": value("motor_driver", "ramps_begun_late"),           # after their start: part skipped
+        "ramps_begun_late": value("motor_driver", "ramps_begun_late"),           # after their start (skipped.py)
         "ramp_late_max_ms": 1e3 * value("motor_driver", "ramp_late_max_s"),
         "touchdown_predicted_late_max_ms": 1e3 * value("deadbeat_controller", "touchdown_predicted_late_max_s"),
         "touchdown_predicted_early_max_ms": 1e3 * value("deadbeat_controller", "touchdown_predicted_early_max_s"),

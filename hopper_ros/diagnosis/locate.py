@@ -368,7 +368,7 @@ def _hysteresis(c, dy: np.ndarray, hz: np.ndarray):
         return 0.0
     x = float(c.rest_length) - np.sqrt(dy * dy + hz * hz)
     q = np.zeros_like(x)
-    for k in range(1, len(x)):
+    for k in range(1, len(x)):      # rate-independent: the rate of a compression step is the state's step
         q[k] = float(np.clip(q[k - 1] + laws.hysteresis_rate(c, q[k - 1], x[k] - x[k - 1]), -1.0, 1.0))
     return q
 
