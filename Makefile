@@ -13,8 +13,9 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 setup:
 	@bash tools/setup.sh
 
+# The node tests and, beside them at nice 19, the CPU-bound diagnosis tests (tools/test.sh).
 test: setup
-	$(VENV_PYTHON) -m pytest -q -p no:cacheprovider --durations=25 test
+	@bash tools/test.sh
 
 # BENCH_ARGS, e.g. BENCH_ARGS=--quick or BENCH_ARGS="--only messages"
 bench: setup

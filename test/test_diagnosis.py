@@ -22,6 +22,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
 from diagnosis_sim_sweep import cases, make_recording  # noqa: E402
 from diagnosis_suite import score  # noqa: E402
 
+pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
+
 # touchdown_loss_across: too small to stand above noise by force, one stride at a time; located by fit.
 # The pair: alone, the gravity makes the next apex's speed worse (the delay is missing), so a constant flight
 # force is discovered first and gives way to the gravity when revisited beside the delay.

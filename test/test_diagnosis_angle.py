@@ -19,6 +19,8 @@ from hopper_ros.diagnosis.simulate import backlash_reading
 from hopper_ros.physics.params import load_params
 from hopper_ros.recording.recordings import load_recording
 
+pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
+
 HERE = Path(__file__).resolve().parent
 BACKLASH = 0.007                                   # [rad] the play between the leg and its encoder
 RIPPLE = (0.8, 0.6, 0.5)                           # plant B's A [N m], period [rad of the leg angle], phase

@@ -21,6 +21,8 @@ from hopper_ros.diagnosis.settings import Settings
 from hopper_ros.physics.params import load_params
 from hopper_ros.recording.recordings import load_recording
 
+pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
+
 HERE = Path(__file__).resolve().parent
 BOARD = {"H": 0.015, "y0": 5.0, "l": 3.0}             # plant C: a 15 mm board from 5 m over 3 m of each lap
 WAVE = {"a": 0.012, "L": 10.9, "phase": 2.0}         # plant B: a 12 mm undulation once a lap

@@ -17,6 +17,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
 from diagnosis_suite import _expected, score  # noqa: E402
 from independent_plant.suite import write_suite  # noqa: E402
 
+pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
+
 SUBSET = ("clean_1", "flight_air_drag", "actuator_saturation", "leg_slide_coulomb", "leg_rest_length", "other_flight_lift",
           "other_ground_higher", "other_tether", "other_boom_bending", "sensor_z_delay", "pair_drag_gain",
           "pair_toemass_delay", "pair_stiffness_thetaoffset", "other_hip_torsion_spring", "other_toe_slip")

@@ -19,6 +19,8 @@ from hopper_ros.diagnosis import diagnose_file
 from hopper_ros.diagnosis.simulate import periodic_y
 from hopper_ros.physics import laws
 
+pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
+
 PLANT_C = Path(__file__).resolve().parent / "plant_c"
 STRIDES = 28
 HYSTERESIS = (2000.0, 0.0025)            # plant C's k_h [N/m], x_y [m]: a bound of 5 N

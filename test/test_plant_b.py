@@ -16,6 +16,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "bench"))
 from plant_b_suite import score  # noqa: E402
 
+pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
+
 
 def test_plant_b_checks_itself_against_the_thesis():
     """Energy in stance without damping and torque, flight against (2.13)-(2.16), the (2.12) factor, the signs."""
