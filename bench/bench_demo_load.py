@@ -5,8 +5,8 @@ processes per core, a second real-time process (SCHED_FIFO 50, the demo loop's p
 to 8 ms every 25 ms), fsync'd writes of 16 MiB and stalls of the simulated robot's process (SIGSTOP
 for 60-150 ms every 2-4 s):
 - 10 with launch/demo.launch.yaml, the loop on SCHED_FIFO as `make demo` runs it (`*_fifo`);
-- 5 with launch/demo_500hz.launch.yaml, every node with normal scheduling (`*_normal`): the machine
-  that does not permit SCHED_FIFO, so the load's real-time process runs without it too.
+- 5 at 500 Hz with normal scheduling (`hopper demo --normal-scheduling`: the same graph, as `make demo` runs
+  it where SCHED_FIFO is not permitted; `*_normal`), so the load's real-time process runs without it too.
 (--quick: 1 and 1.) Each on a ROS domain of its own. Per run, from the demo's strides.csv and
 health.json (the nodes' diagnostics from the throw on, hopper_ros/cli/demo.py): a fall, the largest
 |apex error| past each setpoint's first stride, the states that reached the event detector more
@@ -75,7 +75,7 @@ def one_run(index: int, fifo: bool) -> dict:
     env = dict(child_env(), ROS_DOMAIN_ID=str(free_domain_id(index + 40)))
     argv = [sys.executable, "-m", "hopper_ros.cli", "demo", "--strides", str(STRIDES), "-o", str(folder)]
     if not fifo:
-        argv += ["--launch", "demo_500hz.launch.yaml"]
+        argv += ["--normal-scheduling"]
     started = time.monotonic()
     with Load(profile(fifo), stall_target=sim_pid, seed=index) as load, \
             open(folder / "demo.out", "w", encoding="utf-8") as out:

@@ -174,7 +174,17 @@ def test_show_args_and_print(hopper_cli):
     shown = hopper_cli("launch", "hopper_ros", "demo.launch.yaml", "realtime_priority:=0", "driver_priority:=0",
                        "--show-args")
     assert shown.wait() == 0 and shown.stdout == ("realtime_priority:=0\nrobot_priority:=50\ndriver_priority:=0\n"
+                                                  "hardware_file:=hardware.yaml\nperiod:=0.001\n"
+                                                  "driver_config:=motor_driver.yaml\n"
                                                   "encoder_port:=0\ncan_port:=0\nrobot_cpu:=\nloop_cpu:=\n")
+    # what `hopper demo` runs where SCHED_FIFO is not permitted: the robot, its drive and the sensing at 500 Hz
+    from hopper_ros.cli.demo import NORMAL_SCHEDULING
+    normal = hopper_cli("launch", "demo.launch.yaml", *NORMAL_SCHEDULING, "--print")
+    assert normal.wait() == 0
+    lines = dict(line.split(": ", 1) for line in normal.stdout.splitlines())
+    assert "-p period:=0.002 -p hardware_file:=demo/hardware_500hz.yaml" in lines["sim_robot"], lines["sim_robot"]
+    assert "-p config_file:=demo/motor_driver_500hz.yaml -p sync_period:=0.002" in lines["motor_driver"]
+    assert lines["sensing"].count("hardware_file:=demo/hardware_500hz.yaml") == 2, lines["sensing"]
     printed = hopper_cli("launch", "demo_500hz.launch.yaml", "--print")
     assert printed.wait() == 0
     assert [line.split(":")[0] for line in printed.stdout.splitlines()] == [

@@ -1,12 +1,13 @@
 """`hopper demo`: the closed-loop run of Fig 5.5 on the simulated robot, start to report.
 
-  hopper demo [--strides N] [-o DIR] [--launch FILE] [--timeout S]
+  hopper demo [--strides N] [-o DIR] [--launch FILE] [--normal-scheduling] [--timeout S]
 
 Starts the whole graph with our launcher (`launch/demo.launch.yaml`, 1 kHz with the loop's nodes
 on SCHED_FIFO, the encoder bridge, state estimator, event detector and deadbeat controller composed
 in one process, the simulated robot, motor driver and setpoint scheduler apart; where SCHED_FIFO is
-not permitted `launch/demo_500hz.launch.yaml`, every node its own process; the log goes to
-DIR/launch.log), waits until the graph is up (state
+not permitted the same graph at 500 Hz with normal scheduling (`--normal-scheduling` asks for that;
+`--launch demo_500hz.launch.yaml` runs every node in its own process, as `ros2 launch` can); the log goes
+to DIR/launch.log), waits until the graph is up (state
 estimates flowing, drive enabled, controller listening), throws the robot to the first setpoint's
 apex, follows it stride by stride (one progress line per apex), stops everything cleanly after N
 strides, then prints the per-stride table (apex height and speed against their setpoints) and
@@ -33,7 +34,9 @@ from hopper_ros.launch import launch_file_path
 
 HELP = "run the closed-loop Fig 5.5 demo on the simulated robot and report it"
 DEFAULT_LAUNCH = "demo.launch.yaml"
-FALLBACK_LAUNCH = "demo_500hz.launch.yaml"   # without SCHED_FIFO (launch/demo.launch.yaml says why)
+# without SCHED_FIFO: the same graph at 500 Hz with normal scheduling (launch/demo.launch.yaml says why)
+NORMAL_SCHEDULING = ("realtime_priority:=0", "robot_priority:=0", "driver_priority:=0", "period:=0.002",
+                     "hardware_file:=demo/hardware_500hz.yaml", "driver_config:=demo/motor_driver_500hz.yaml")
 STARTUP_TIMEOUT = 60.0   # [s] until the graph is up
 STOP_TIMEOUT = 20.0      # [s] for the launcher to stop everything
 MONITOR_DEPTH = 200      # queue of each topic the demo follows (events: ~10 per second)
@@ -48,7 +51,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--strides", type=int, default=30, help="strides to run after the throw (default 30)")
     parser.add_argument("-o", "--output", default="demo_out", help="output folder (default demo_out)")
     parser.add_argument("--launch", default=None,
-                        help=f"launch file (default {DEFAULT_LAUNCH}, or {FALLBACK_LAUNCH} without SCHED_FIFO)")
+                        help=f"launch file (default {DEFAULT_LAUNCH}: at 1 kHz on SCHED_FIFO, or at 500 Hz with normal "
+                             "scheduling where SCHED_FIFO is not permitted)")
+    parser.add_argument("--normal-scheduling", action="store_true",
+                        help=f"run {DEFAULT_LAUNCH} at 500 Hz with normal scheduling even where SCHED_FIFO is permitted")
     parser.add_argument("--timeout", type=float, default=120.0, help="give up after S seconds of running (default 120)")
 
 
@@ -69,18 +75,20 @@ class StrideRow:
 def main(args: argparse.Namespace) -> int:
     out = Path(args.output).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    launch = args.launch
-    if launch is None:
+    launch, normal = args.launch, args.normal_scheduling
+    if launch is None and not normal:
         allowed, why = realtime_scheduling_allowed()
-        launch = DEFAULT_LAUNCH if allowed else FALLBACK_LAUNCH
         if not allowed:
-            print(f"demo: SCHED_FIFO is not permitted here ({why}): running the 500 Hz graph", flush=True)
+            normal = True
+            print(f"demo: SCHED_FIFO is not permitted here ({why}): running the graph at 500 Hz with normal "
+                  "scheduling", flush=True)
+    launch = launch or DEFAULT_LAUNCH
     try:
         launch_file = launch_file_path(launch)
     except FileNotFoundError as exc:
         print(f"demo: error: {exc}", file=sys.stderr)
         return 3
-    if launch == DEFAULT_LAUNCH:
+    if launch == DEFAULT_LAUNCH and not normal:
         # the monitor too, below the loop's nodes: with normal scheduling it was starved for strides
         apply_realtime_priority({REALTIME_PRIORITY_VAR: str(MONITOR_PRIORITY)})
     log_path = out / "launch.log"
@@ -88,8 +96,9 @@ def main(args: argparse.Namespace) -> int:
     log = open(log_path, "w", encoding="utf-8")
     # the simulated robot on free ports of its own: a second graph on this machine (a test, a soak) never
     # reaches its robot, nor it theirs (a file of the user's own gets no arguments it may not declare)
-    ports = robot_port_arguments() if launch in (DEFAULT_LAUNCH, FALLBACK_LAUNCH) else ()
-    launcher = subprocess.Popen([sys.executable, "-m", "hopper_ros.cli", "launch", str(launch_file), *ports],
+    ports = robot_port_arguments() if launch in (DEFAULT_LAUNCH, "demo_500hz.launch.yaml") else ()
+    rate = NORMAL_SCHEDULING if normal and launch == DEFAULT_LAUNCH else ()
+    launcher = subprocess.Popen([sys.executable, "-m", "hopper_ros.cli", "launch", str(launch_file), *ports, *rate],
                                 stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
     rows: list[StrideRow] = []
     problem = ""
