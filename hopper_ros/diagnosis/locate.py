@@ -24,7 +24,7 @@ from hopper_ros.physics import lanes, laws
 
 from .data import LEAD_RESOLVED, StrideData
 from .ringing import ringing, since_liftoff
-from .simulate import BACKLASH, Variant, hold_direction, variant_key
+from .simulate import BACKLASH, SWING, Variant, hold_direction, variant_key
 from .sites import CHANNEL_SITE, REGISTRY, RESIDUAL_SITES, TRAJECTORY_SITES
 from .smoothing import smooth
 
@@ -223,6 +223,11 @@ def _recorded(data: StrideData, sensors: dict):
         parts = [x[a:b] - ringing(sensors, name, since_liftoff(rec.t[a:b], data.liftoffs)) if name in CHANNEL_SITE
                  else x[a:b]
                  for name, x in zip(("y", "z", "theta"), channels)]
+        if sensors.get(SWING, 0.0):     # in flight, the centre of mass of body and swinging leg (`swing`)
+            flight = np.isin(data.phase[a:b], (0, 4))
+            dy, dz = laws.swing_offset(parts[2], 0.0)
+            parts[0] = parts[0] + np.where(flight, sensors[SWING] * dy, 0.0)
+            parts[1] = parts[1] + np.where(flight, sensors[SWING] * dz, 0.0)
         out.append((rec.t[a:b] - s.apex_time[i], *parts))
     return out
 
