@@ -24,7 +24,7 @@ from hopper_ros.physics import lanes, laws
 
 from .data import LEAD_RESOLVED, StrideData
 from .ringing import ringing, since_liftoff
-from .simulate import BACKLASH, Variant, hold_direction, variant_key
+from .simulate import BACKLASH, SWING, Variant, hold_direction, variant_key
 from .sites import CHANNEL_SITE, REGISTRY, RESIDUAL_SITES, TRAJECTORY_SITES
 from .smoothing import smooth
 
@@ -223,6 +223,14 @@ def _recorded(data: StrideData, sensors: dict):
         parts = [x[a:b] - ringing(sensors, name, since_liftoff(rec.t[a:b], data.liftoffs)) if name in CHANNEL_SITE
                  else x[a:b]
                  for name, x in zip(("y", "z", "theta"), channels)]
+        if sensors.get(SWING, 0.0):     # in flight, the centre of mass of body and swinging leg (`swing`), the
+            # same as the body's at touchdown and lift-off, so that no phase's smoothing sees a step
+            t, theta = rec.t[a:b], parts[2]
+            caught = np.interp(s.liftoff_time[i], t, theta)
+            for flight, ref in ((t < s.touchdown_time[i], s.touchdown_angle[i]), (t >= s.liftoff_time[i], caught)):
+                dy, dz = laws.swing_offset(theta[flight], ref)
+                parts[0][flight] += sensors[SWING] * dy
+                parts[1][flight] += sensors[SWING] * dz
         out.append((rec.t[a:b] - s.apex_time[i], *parts))
     return out
 

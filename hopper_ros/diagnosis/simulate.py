@@ -32,6 +32,7 @@ FIELDS = laws.Coefficients.scalar_names() + laws.Coefficients.term_names()
 BACKLASH = "theta_backlash"   # the sensors' key of the leg angle encoder's backlash [rad] (`backlash_reading`)
 # the sensors' keys of an error of the forward position's reading periodic in the boom's angle (`periodic_y`) [m, m, m]
 Y_PERIODIC = ("y_periodic_sin", "y_periodic_cos", "y_periodic_period")
+SWING = "leg_swing"     # the sensors' key of the leg's swing reacting on the body in flight, mu r_c [m] (`swing`)
 
 
 def periodic_y(y, a, b, period):
@@ -151,14 +152,29 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
     periodic = np.array([[v.sensors.get(k, 0.0 if k != Y_PERIODIC[2] else 1.0) for k in Y_PERIODIC] for v in variants])
     wavy = bool(np.any(periodic[:, :2] != 0.0))
     speed_read = np.ones(nv * ns)
+    speed0 = np.tile(s.forward_speed, nv)
+    lift = np.repeat(np.array([v.sensors.get(SWING, 0.0) for v in variants]), ns)   # mu r_c [m] (`swing`)
+    if np.any(lift != 0.0):     # the lanes are the centre of mass of body and swinging leg: started from it
+        from .swing import geometry
+        geo = {k: np.tile(v, (nv, 1)) if v.ndim == 2 else np.tile(v, nv)
+               for k, v in geometry(data, int(np.floor(duration / 1e-3)) + 1).items()}
+        z0 = z0 + lift * geo["dz"][:, 0]
+        speed0 = speed0 + lift * geo["start_slope"]
     if wavy:        # the apex's place and speed as read: y_0 + e(y_0) and v_0 (1 + e'(y_0))
         a, b, period = (np.repeat(periodic[:, k], ns) for k in range(3))
         apex_read = np.tile(s.apex_y, nv)
         y0 = apex_read - periodic_y(apex_read, a, b, period)[0]
         e0, slope0 = periodic_y(y0, a, b, period)
         speed_read = 1.0 + slope0
-    res = lanes.simulate_lanes(coef, z0, np.tile(s.forward_speed, nv) / sens["y_scale"] / speed_read, theta_td,
+    res = lanes.simulate_lanes(coef, z0, speed0 / sens["y_scale"] / speed_read, theta_td,
                                np.tile(s.tau_0, nv), np.tile(s.ramp_duration, nv), duration=duration, needed=needed)
+    if np.any(lift != 0.0):     # ... and read back as the body's, its next apex as the apex fits read it
+        m, dy = lift[:, None], geo["dy"]
+        res = dataclasses.replace(res, y=(res.y - m * (dy - dy[:, :1])).astype(res.y.dtype),
+                                  z=(res.z - m * geo["dz"]).astype(res.z.dtype),
+                                  next_apex_height=res.next_apex_height - lift * geo["next_dz"],
+                                  next_forward_speed=res.next_forward_speed - lift * geo["next_slope"],
+                                  stride_length=res.stride_length - lift * (geo["next_dy"] - dy[:, 0]))
     if np.any(play > 0.0):
         res = dataclasses.replace(res, theta=backlash_reading(res.theta, held, play))
     length_read, next_speed_read = res.stride_length, 1.0

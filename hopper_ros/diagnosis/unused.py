@@ -1,6 +1,7 @@
 """Laws of what the model does not use, judged on the trajectory test's noise level (issue 28, point 1): the boom's
-angle about its vertical axis (`azimuth`: the forward position read with an error periodic in it) and the leg's
-compression since its last reversal (`hysteresis`: a hysteretic leg force).
+angle about its vertical axis (`azimuth`: the forward position read with an error periodic in it), the leg's
+compression since its last reversal (`hysteresis`: a hysteretic leg force) and the leg's angle in flight (`swing`:
+the body's recoil against the leg swung in flight).
 
 Where the accepted effects, the leg angle's laws (`angle`) and a drift leave the recording not explained, each law
 is fitted (the period by a frequency scan, the yield on a grid, the trajectories choosing) and put in a round with
@@ -29,6 +30,7 @@ from .locate import locate
 from .records import Errors, Reference, Scored
 from .search import Search
 from .simulate import CHANNELS, simulate_variants
+from .swing import swing_candidate
 from .yardstick import trajectory_sd
 
 WHAT = "the boom's angle and the leg's reversals"
@@ -72,8 +74,8 @@ def refitted(search: Search, chosen: list[Scored], current: Reference) -> Refere
 
 
 def find_unused_law(search: Search, chosen: list[Scored], current: Reference, sets, located: set) -> Scored | None:
-    """The boom angle's periodic reading error (where its scan stands on held-out strides) or the leg's hysteresis,
-    where it wins a round beside the accepted effects against the library's (each judged against the accepted
+    """The boom angle's periodic reading error (where its scan stands on held-out strides), the leg's hysteresis or
+    the leg's swing in flight, where it wins a round beside the accepted effects against the library's (each judged against the accepted
     effects `refitted` on this search); None otherwise."""
     settings = search.settings
     stack = search.stack(chosen)
@@ -84,6 +86,7 @@ def find_unused_law(search: Search, chosen: list[Scored], current: Reference, se
         laws.append(best_candidate(search, stack, [eccentricity_candidate(e) for e in eccentric], current))
     yields = hysteresis.yields(settings)
     laws.append(best_candidate(search, stack, [hysteresis.hysteresis_candidate(x) for x in yields], current))
+    laws.append(swing_candidate())
     return win_round(search, chosen, current, laws, located, WHAT)
 
 

@@ -457,3 +457,10 @@ def liftoff_velocity(c: Coefficients, theta, ydot, zdot):
 def touchdown_height(c: Coefficients, theta):
     """Body height at which the toe, at rest length and angle theta, meets the ground."""
     return c.ground_height + c.rest_length * np.cos(theta)
+
+
+def swing_offset(theta, theta_ref):
+    """The centre of mass of body and leg less the body's, per metre of mu r_c (the leg's mass share m_l/(m_b + m_l)
+    times its centre's distance below the hip), from the leg at `theta_ref` to `theta`: in flight the centre of mass
+    follows (2.8) and the body recoils against the leg's swing, p = c - mu r_c (sin theta, -cos theta) + const."""
+    return np.sin(theta) - np.sin(theta_ref), np.cos(theta_ref) - np.cos(theta)
