@@ -157,6 +157,7 @@ class StrideData:
     # dataclasses.replace: a subset of the strides has its own
     simulated: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     located: dict = field(default_factory=dict, init=False, repr=False, compare=False)   # ... (locate.locate)
+    swing: dict = field(default_factory=dict, init=False, repr=False, compare=False)     # ... (swing.geometry)
 
     def __repr__(self) -> str:
         return f"StrideData({self.rec.source}, {len(self.strides)} strides)"

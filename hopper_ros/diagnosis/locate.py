@@ -27,6 +27,7 @@ from .ringing import ringing, since_liftoff
 from .simulate import BACKLASH, SWING, Variant, hold_direction, variant_key
 from .sites import CHANNEL_SITE, REGISTRY, RESIDUAL_SITES, TRAJECTORY_SITES
 from .smoothing import smooth
+from .swing import recoil
 
 FLIGHT_WINDOW = 71     # samples of the Savitzky-Golay fit in flight
 STANCE_WINDOW = 19     # ... in stance
@@ -226,11 +227,9 @@ def _recorded(data: StrideData, sensors: dict):
         if sensors.get(SWING, 0.0):     # in flight, the centre of mass of body and swinging leg (`swing`), the
             # same as the body's at touchdown and lift-off, so that no phase's smoothing sees a step
             t, theta = rec.t[a:b], parts[2]
-            caught = np.interp(s.liftoff_time[i], t, theta)
-            for flight, ref in ((t < s.touchdown_time[i], s.touchdown_angle[i]), (t >= s.liftoff_time[i], caught)):
-                dy, dz = laws.swing_offset(theta[flight], ref)
-                parts[0][flight] += sensors[SWING] * dy
-                parts[1][flight] += sensors[SWING] * dz
+            dy, dz = recoil(t, theta, s.touchdown_time[i], s.liftoff_time[i], s.touchdown_angle[i],
+                            np.interp(s.liftoff_time[i], t, theta))
+            parts[0], parts[1] = parts[0] + sensors[SWING] * dy, parts[1] + sensors[SWING] * dz
         out.append((rec.t[a:b] - s.apex_time[i], *parts))
     return out
 

@@ -65,11 +65,21 @@ def _fit_slope(t: np.ndarray, x: np.ndarray, phase: np.ndarray, t0: float, half:
     return float(np.polyfit(t[lo:hi + 1] - t0, x[lo:hi + 1], 2)[1])
 
 
+def recoil(times, angle, touchdown_time: float, liftoff_time: float, touchdown_angle: float, caught: float):
+    """(dy, dz) per metre of mu r_c at `times`, the leg at `angle` there: the centre of mass of body and leg less
+    the body's (`laws.swing_offset`), in descent from the angle held for touchdown, in ascent from the angle caught
+    at lift-off (where body and centre of mass move together), 0 in stance."""
+    dy, dz = np.zeros(len(times)), np.zeros(len(times))
+    for flight, ref in ((times < touchdown_time, touchdown_angle), (times >= liftoff_time, caught)):
+        dy[flight], dz[flight] = swing_offset(angle[flight], ref)
+    return dy, dz
+
+
 def geometry(data, samples: int, sample: float = 1e-3) -> dict:
     """Per stride, at unit mu r_c: the offset of the centre of mass from the body on the lanes' grid (`dy`, `dz`,
     strides x samples; 0 in stance), the apex speed fit's share at the start and next apex (`start_slope`,
     `next_slope`) and the offsets at the next apex (`next_dy`, `next_dz`). Computed once per recording."""
-    cache = data.__dict__.setdefault("_swing", {})
+    cache = data.swing
     if samples in cache:
         return cache[samples]
     s, rec = data.strides, data.rec
@@ -84,9 +94,7 @@ def geometry(data, samples: int, sample: float = 1e-3) -> dict:
         lane_t = s.apex_time[i] + sample * np.arange(samples)
         angle = np.interp(lane_t, t[a:b], theta[a:b])
         caught = np.interp(s.liftoff_time[i], t[a:b], theta[a:b])
-        descent, ascent = lane_t < s.touchdown_time[i], lane_t >= s.liftoff_time[i]
-        for mask, ref in ((descent, s.touchdown_angle[i]), (ascent, caught)):
-            dy[i, mask], dz[i, mask] = swing_offset(angle[mask], ref)
+        dy[i], dz[i] = recoil(lane_t, angle, s.touchdown_time[i], s.liftoff_time[i], s.touchdown_angle[i], caught)
         out["next_dy"][i], out["next_dz"][i] = swing_offset(np.interp(s.next_apex_time[i], t[a:b], theta[a:b]),
                                                             caught)
         out["start_slope"][i] = _fit_slope(t, sin, data.phase, s.apex_time[i], half)
