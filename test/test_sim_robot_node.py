@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 import socket
 import time
@@ -11,6 +12,8 @@ import pytest
 
 from conftest import REPO, SAFETY_TIMEOUT, free_port, spin_until
 from hopper_ros.hardware import packet as packet_format
+from hopper_ros.sim.plant import PlantEvent
+from hopper_ros.sim.stance import LATE_AFTER, SAID_AFTER
 
 
 def receive_packets(sock: socket.socket, count: int, timeout: float = SAFETY_TIMEOUT) -> list[bytes]:
@@ -225,3 +228,48 @@ def test_sigterm_stops_sim_robot_whatever_its_hub_clients_do(hopper_cli):
     assert stopped_after < 10.0
     assert reopened >= 200
     assert "stopping on SIGTERM" in node.stderr
+
+
+# --------------------------------------------------------------------------- in-process: the stepping thread's callbacks
+# Issue 29: under load a stance whose ramp torque reached the leg late (said as a warning) followed one said at
+# info from the same call site; rclpy raised "Logger severity cannot be changed between calls", the stepping
+# thread died, the robot stood still while its node lived on, and the demo never hopped again.
+
+
+@pytest.fixture
+def sim_node(rclpy_session):
+    from rclpy.parameter import Parameter
+
+    from hopper_ros.nodes.sim_robot import SimRobotNode
+
+    node = SimRobotNode(parameter_overrides=[Parameter("can", value="none"), Parameter("hold", value=True)])
+    node.runner.close()             # the test steps the robot itself, from one thread
+    yield node
+    node.destroy_node()
+
+
+def stance(node, onset: float) -> None:
+    """One stance through the node's own callback: touchdown, the ramp torque at `onset`, lift-off."""
+    sample = node.robot.step(False)
+    truth = sample.truth
+    motion = {name: getattr(truth, name) for name in ("t", "y", "z", "ydot", "zdot", "leg_angle")}
+    emit = node._emit
+    emit(dataclasses.replace(sample, events=[PlantEvent(**motion, kind="touchdown")]))
+    at_onset = dataclasses.replace(truth, t=truth.t + onset, hip_torque=5.0)
+    emit(dataclasses.replace(sample, truth=at_onset, events=[]))
+    ended = dataclasses.replace(truth, t=truth.t + 0.1)
+    emit(dataclasses.replace(sample, truth=ended, events=[PlantEvent(**(motion | {"t": ended.t}), kind="liftoff")]))
+
+
+def test_a_late_stance_after_one_in_time_is_said_without_killing_the_stepping_thread(sim_node):
+    said_in_time = (SAID_AFTER + LATE_AFTER) / 2       # said at info
+    late = 2 * LATE_AFTER                               # said as a warning
+    for onset in (said_in_time, late, said_in_time):
+        stance(sim_node, onset)
+    assert (sim_node.stances.stances, sim_node.stances.late) == (3, 1)
+
+
+def test_a_stepping_thread_that_raises_ends_the_node_with_a_failure(sim_node):
+    assert not sim_node.finished
+    sim_node.runner._on_failure(RuntimeError("a step raised"))
+    assert sim_node.finished and sim_node.failed

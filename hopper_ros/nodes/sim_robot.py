@@ -42,7 +42,7 @@ from rclpy.node import Node
 
 from hopper_ros.hardware.config import load_hardware
 from hopper_ros.msg import ApexState, BodyState, GaitEvent, GroundReactionForce
-from hopper_ros.nodes.common import read_only_parameters, run_node
+from hopper_ros.nodes.common import log_event, read_only_parameters, run_node
 from hopper_ros.nodes.diagnostics import OK, WARN, DiagnosticsReporter
 from hopper_ros.nodes.stamps import stamp_of_ns
 from hopper_ros.sim.config import load_sim_config
@@ -87,7 +87,7 @@ class SimRobotNode(Node):
         throw_lead = param("throw_lead", 0.05, "throws start this long before the apex [s]")
         self.runner = SimRunner(config, hardware, mode=mode, can=can_setting, can_port=can_port, udp_host=udp_host,
                                 udp_port=udp_port, duration=duration, experiments=experiments, throw_lead=throw_lead,
-                                on_sample=self._emit, on_done=self._done)
+                                on_sample=self._emit, on_done=self._done, on_failure=self._failed)
         self.robot = self.runner.robot
         self.robot.throw(apex_height, forward_speed, leg_angle, lead_time=throw_lead, hold=hold)
         self._force_msg = GroundReactionForce()
@@ -102,6 +102,7 @@ class SimRobotNode(Node):
         self.create_timer(DIAGNOSTICS_PERIOD, self._report)
 
         self.finished = False                       # run_node ends the process once set
+        self.failed = False                         # ... with status 1 (the stepping thread raised)
         self.counters = self.runner.counters
         self.stances = StanceTorque()
         self._stamp_origin_ns = self.get_clock().now().nanoseconds
@@ -114,6 +115,15 @@ class SimRobotNode(Node):
         self.runner.start()
 
     # ------------------------------------------------------------------ the stepping thread's callbacks
+    def _failed(self, exc: BaseException) -> None:
+        """The stepping thread raised and ended: the robot no longer moves, so the node ends (status 1)
+        and the launcher stops or respawns it; the drive's watchdog disables the motor meanwhile."""
+        import traceback
+
+        self.get_logger().error(f"the simulated robot stopped at t = {self.robot.t:.3f} s: "
+                                f"{type(exc).__name__}: {exc}\n{''.join(traceback.format_exception(exc))}")
+        self.failed = self.finished = True
+
     def _done(self) -> None:
         self.get_logger().info(f"simulated {self.robot.t:.3f} s: done, real-time factor "
                                f"{self.runner.realtime_factor():.2f}, {self.runner.counters['resyncs']} freezes")
@@ -143,8 +153,7 @@ class SimRobotNode(Node):
         stances.add(sample, self.robot.current_mode, self.runner.behind)
         if stances.stances > closed and not stances.onsets[-1] <= SAID_AFTER:
             onset, behind = stances.onsets[-1], stances.behind
-            said = self.get_logger().info if onset <= stances.late_after else self.get_logger().warning
-            said(f"stance ending at t = {truth.t:.3f} s: " + (
+            log_event(self.get_logger(), "info" if onset <= stances.late_after else "warning", f"stance ending at t = {truth.t:.3f} s: " + (
                 "no ramp torque reached the leg" if onset != onset else
                 f"the ramp torque reached the leg {onset * 1e3:.1f} ms after the touchdown (the robot ran "
                 f"{behind * 1e3:.1f} ms behind its clock at most until then)"))

@@ -46,12 +46,15 @@ def open_drive(can_setting: str, hardware: HardwareConfig, port: int | None):
 
 class SimRunner:
     """SimRobot with its drive, packet stream and pacing. `on_sample(sample)` is called from the
-    stepping thread every period; `on_done()` once `duration` of simulated time has run."""
+    stepping thread every period; `on_done()` once `duration` of simulated time has run;
+    `on_failure(exc)` if the stepping thread raised: it has ended, the robot stands still, and the
+    caller must end too (a process whose robot died silently kept its node alive: issue 29)."""
 
     def __init__(self, config, hardware: HardwareConfig, *, mode: str = "realtime", can: str = "hub",
                  can_port: int | None = None, udp_host: str = "127.0.0.1", udp_port: int | None = None,
                  duration: float = 0.0, experiments: bool = False, throw_lead: float = 0.05,
-                 on_sample: Callable[[SimSample], None] = lambda sample: None, on_done: Callable[[], None] = lambda: None):
+                 on_sample: Callable[[SimSample], None] = lambda sample: None, on_done: Callable[[], None] = lambda: None,
+                 on_failure: Callable[[BaseException], None] = lambda exc: None):
         if mode not in MODES:
             raise ValueError(f"mode must be realtime or lockstep, got {mode!r}")
         if udp_host not in ("127.0.0.1", "localhost"):
@@ -59,7 +62,7 @@ class SimRunner:
         if experiments and can != "none":
             raise ValueError("experiments:=true runs the hip itself: it needs can:=none (no drive on a bus)")
         self.mode, self.duration, self.throw_lead = mode, duration, throw_lead
-        self._on_sample, self._on_done = on_sample, on_done
+        self._on_sample, self._on_done, self._on_failure = on_sample, on_done, on_failure
         self.drive, self._close_drive, self.hub = open_drive(can, hardware, can_port)
         self.robot = SimRobot(config, hardware, drive=self.drive)
         self.series = ExperimentSeries(self.robot, seed=config.seed) if experiments else None
@@ -74,7 +77,7 @@ class SimRunner:
         self._pending_throw = None
         self._stop = threading.Event()
         self._wall_start = time.monotonic()
-        self._thread = threading.Thread(target=self._run, name="sim-robot", daemon=True)
+        self._thread = threading.Thread(target=self._run_reporting, name="sim-robot", daemon=True)
 
     def start(self) -> None:
         self._wall_start = time.monotonic()
@@ -105,6 +108,12 @@ class SimRunner:
         self._udp.close()
         if self._close_drive is not None:
             self._close_drive()
+
+    def _run_reporting(self) -> None:
+        try:
+            self._run()
+        except Exception as exc:  # noqa: BLE001 - the caller decides; the thread has ended either way
+            self._on_failure(exc)
 
     def _run(self) -> None:
         period = self.robot.period
