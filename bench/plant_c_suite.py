@@ -55,6 +55,8 @@ SAME["spring_hysteresis"] = {"leg_hysteresis": lambda m: m}
 SAME["azimuth_eccentricity"] = {"y_periodic": lambda m: m}
 # the leg's swing in flight reacting on the body (`diagnosis.swing`): mu r_c [m], the mechanism's own magnitude
 SAME["leg_swing_reaction"] = {"leg_swing": lambda m: m}
+# the hip motor's current limited by the drive's voltage against its back-EMF (`diagnosis.backemf`): V [V]
+SAME["motor_back_emf"] = {"drive_voltage": lambda m: m}
 # plant-C mechanism -> the forms of a dependence on the track position (`diagnosis.dependence`) that are its law
 # (by mechanism) and those that are its floor alone (look-alike)
 DEPENDENCES = {"floor_board": ({"board"}, set()), "tilted_pivot": ({"tilt"}, {"wave"})}

@@ -40,6 +40,7 @@ class Candidate:
     equation: str = ""
     secondary: tuple = ()         # library.Parameter: fitted once the candidate is accepted (`_fit_secondary`)
     held: dict = dataclasses.field(default_factory=dict)   # secondary name -> (value, unit) other than the model's
+    refinements: int = 1          # fine-grid passes of a search (`Search.refine`): more where the SSE turns sharply
 
     def describe(self, value: float) -> str:
         if self.discovery is not None:

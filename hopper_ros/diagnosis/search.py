@@ -151,22 +151,30 @@ class Search:
 
     def refine(self, stack: Stack, ranking: list[Scored], reference: Reference, exact: int = 12) -> list[Scored]:
         """Every candidate again on a fine grid between the neighbours of its best grid value (an SSE is not
-        parabolic where an effect switches on, e.g. a torque limit), then the best scored from strides simulated
+        parabolic where an effect switches on, e.g. a torque limit; a candidate with `refinements` n > 1 n times,
+        each grid finer), then the best scored from strides simulated
         at their fold magnitudes (no interpolation)."""
-        grids = {}
-        for r in ranking:
-            grid = r.fit.grid
-            k = int(np.argmin(np.abs(grid - r.value)))
-            grids[r.name] = np.linspace(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)], self.settings.grid)
-        refined = {r.name: r for r in self.rank(stack, [r.candidate for r in ranking], reference, grids=grids,
-                                                label=f"{self.progress.stage} (fine grid)")}
-        ranking = [refined[r.name] if refined[r.name].fit.fit_reduction > r.fit.fit_reduction else r
-                   for r in ranking]
+        ranking = self._finer(stack, ranking, reference, ranking)
+        for passes in range(1, max((r.candidate.refinements for r in ranking), default=1)):
+            ranking = self._finer(stack, ranking, reference, [r for r in ranking if r.candidate.refinements > passes])
         ranking.sort(key=lambda r: -r.fit.fit_reduction)
         best = ranking[:exact] + [r for r in ranking[exact:] if r.candidate.kind == "discovered"]
         self.evaluate_exactly(stack, best, reference)
         ranking.sort(key=lambda r: -r.reduction)
         return ranking
+
+    def _finer(self, stack: Stack, ranking: list[Scored], reference: Reference, these: list[Scored]) -> list[Scored]:
+        """`ranking` with each of `these` searched again on a fine grid between the neighbours of its best grid value,
+        where that fits better."""
+        grids = {}
+        for r in these:
+            grid = r.fit.grid
+            k = int(np.argmin(np.abs(grid - r.value)))
+            grids[r.name] = np.linspace(grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)], self.settings.grid)
+        refined = {r.name: r for r in self.rank(stack, [r.candidate for r in these], reference, grids=grids,
+                                                label=f"{self.progress.stage} (fine grid)")}
+        return [refined[r.name] if r.name in refined and refined[r.name].fit.fit_reduction > r.fit.fit_reduction
+                else r for r in ranking]
 
     def evaluate_exactly(self, stack: Stack, results: list[Scored], reference: Reference) -> None:
         """Held-out scores of fitted candidates from strides simulated at their fold magnitudes."""

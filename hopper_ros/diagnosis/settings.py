@@ -56,6 +56,9 @@ class Settings:
     hysteresis_yields: int = 5       # yield deflections of the leg's hysteresis tried (geometric) ...
     hysteresis_yield_min: float = 0.0005   # [m] ... from this ...
     hysteresis_yield_max: float = 0.008    # [m] ... to this
+    winding_resistances: int = 6     # winding resistances of the hip motor's voltage limit tried (geometric) ...
+    winding_resistance_min: float = 0.1    # [ohm] ... from this ...
+    winding_resistance_max: float = 2.0    # [ohm] ... to this
 
 
 _SHARE = {"ge": 0, "le": 1}
@@ -76,6 +79,8 @@ LIMITS = {
     "azimuth_scan": {"ge": 3}, "azimuth_harmonics": {"ge": 1}, "hysteresis_yields": _COUNT,
     "hysteresis_yield_min": {"gt": 0, "le": 0.1, "unit": "m"},
     "hysteresis_yield_max": {"gt": 0, "le": 0.1, "unit": "m"},
+    "winding_resistances": _COUNT, "winding_resistance_min": {"gt": 0, "unit": "ohm"},
+    "winding_resistance_max": {"gt": 0, "unit": "ohm"},
 }
 
 

@@ -113,6 +113,9 @@ class Coefficients:
     hip_ripple_sin: object = 0.0            # [N m] a torque ripple periodic in the leg angle (cogging, a gear's
     hip_ripple_cos: object = 0.0            # [N m]   eccentricity): a sin(2 pi theta/P) + b cos(2 pi theta/P)
     hip_ripple_period: object = 1.0         # P [rad] of the leg angle
+    drive_voltage: object = 0.0             # V [V] the drive's voltage over the winding, against the back-EMF (0: the
+    winding_resistance: object = 1.0        # R [ohm]  current is not limited by it; `voltage_limited`)
+    motor_constant: object = 0.627          # k = G k_t [N m/A] at the hip (hardware.yaml: 26 x 0.02411)
     # discovered terms (coefficients of the term libraries of physics.terms)
     flight_y_terms: tuple = field(default_factory=lambda: zero_terms("flight_y"))
     flight_z_terms: tuple = field(default_factory=lambda: zero_terms("flight_z"))
@@ -173,7 +176,7 @@ def active(c: Coefficients) -> frozenset:
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "spring_cubic", "spring_preload",
          "quadratic_damping", "leg_friction", "leg_hysteresis", "hip_viscous", "hip_friction", "hip_ripple_sin",
          "hip_ripple_cos",
-         "ground_stiffness", "rotor_inertia")
+         "ground_stiffness", "rotor_inertia", "drive_voltage")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -294,6 +297,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     approach = -sin * ydot + cos * zdot                     # rho' with the toe at rest
     theta = np.arctan2(-dy, hz)
     theta_dot = (-ydot * hz + dy * zdot) / (rho * rho)
+    if is_on(c, "drive_voltage"):
+        torque = voltage_limited(c, torque, theta_dot)
     tau = torque + hip_losses(c, theta, theta_dot)
     if is_on(c, "hip_terms"):
         hip_context = stance_context(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown,
@@ -328,6 +333,21 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     if is_on(c, "leg_hysteresis"):
         q_rate = hysteresis_rate(c, hysteresis, -rho_dot)
     return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, toe_rate, ydd, zdd, q_rate)
+
+
+def voltage_limited(c: Coefficients, torque, theta_dot):
+    """The torque a current-controlled hip motor delivers when its drive's voltage V over the winding's resistance R
+    limits the current against the back-EMF of the leg's sweep (motor speed G theta'; k = G k_t, and k_t [N m/A] =
+    [V s/rad]): i in [(-V - k theta')/R, (V - k theta')/R], so
+
+        tau in [-k V/R - (k^2/R) theta',  k V/R - (k^2/R) theta']
+
+    a torque limit that falls with the speed in the direction the motor drives (not a fixed saturation). Lanes with
+    `drive_voltage` 0 are not limited."""
+    k, r = c.motor_constant, c.winding_resistance
+    electrical = k * k / r * theta_dot
+    stall = k * c.drive_voltage / r
+    return where(c.drive_voltage > 0.0, clip(torque, -stall - electrical, stall - electrical), torque)
 
 
 def rotor_torque(c: Coefficients, tau, force, sin, cos, rho, rho_dot, theta_dot):
