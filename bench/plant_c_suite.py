@@ -57,6 +57,8 @@ SAME["azimuth_eccentricity"] = {"y_periodic": lambda m: m}
 SAME["leg_swing_reaction"] = {"leg_swing": lambda m: m}
 # the hip motor's current limited by the drive's voltage against its back-EMF (`diagnosis.backemf`): V [V]
 SAME["motor_back_emf"] = {"drive_voltage": lambda m: m}
+# the flight's position servo released late after touchdown (`diagnosis.servo`): its stiffness K_p [N m/rad]
+SAME["servo_handoff"] = {"servo_release": lambda m: m}
 # plant-C mechanism -> the forms of a dependence on the track position (`diagnosis.dependence`) that are its law
 # (by mechanism) and those that are its floor alone (look-alike)
 DEPENDENCES = {"floor_board": ({"board"}, set()), "tilted_pivot": ({"tilt"}, {"wave"})}

@@ -178,10 +178,20 @@ def find_angle_law(search: Search, chosen: list[Scored], current: Reference, set
     return win_round(search, chosen, current, laws, located, "the leg angle and its reversals")
 
 
+def at_bound(r: Scored, share: float = 1e-3) -> bool:
+    """The fit sits at the end of its search that is not the candidate's origin: the data ask for more than the law
+    can give, so it stands in for something else (the MuJoCo plant's dry hip friction came back a servo released
+    23 ms late at 60 N m/rad, the stiffest searched, on a robot whose servo lets go before touchdown)."""
+    c = r.candidate
+    end = c.high if abs(c.high - c.origin) >= abs(c.low - c.origin) else c.low
+    return abs(r.value - end) <= share * (c.high - c.low)
+
+
 def win_round(search: Search, chosen: list[Scored], current: Reference, laws: list[Candidate],
               located: set, what: str) -> Scored | None:
     """The best of `laws` where it wins a round beside the accepted effects `chosen` against the library's effects
-    (screened as in a round), polished beside them; None where a library effect wins or nothing passes."""
+    (screened as in a round), polished beside them; None where a library effect wins, nothing passes or the law's fit
+    sits at the far end of its search (`at_bound`)."""
     settings = search.settings
     stack = search.stack(chosen)
     taken = {r.name for r in chosen}
@@ -191,7 +201,7 @@ def win_round(search: Search, chosen: list[Scored], current: Reference, laws: li
     search.progress.say(f"{what}: {len(laws)} laws against {len(rivals)} library effects")
     ranking = search.search(stack, laws + rivals, current)
     top, ties = acceptance.choose(ranking, settings)
-    if top is None or top.name not in {c.name for c in laws}:
+    if top is None or top.name not in {c.name for c in laws} or at_bound(top):
         return None
     top.ties, top.alternatives = ties, [r.candidate for r in ranking[:settings.screen] if r is not top]
     return search.polish(chosen, top, current)

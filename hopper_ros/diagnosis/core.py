@@ -179,8 +179,9 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`; or of the boom's
     angle and the leg's reversals, `unused.find_unused_law`, on its search and model reference) beside them all,
     and in place of each of them (that one may have stood in for it: plant B's backlash was named an actuator lag),
-    each earlier effect revisited beside the law. Of the sets found, the smallest whose held-out fit is not clearly
-    worse (paired t below `tie_t`, the sum of E_p, E_v, E_t not worse by `apex_tolerance`, or, given the noise
+    and of two or more in place of them all (plant C's servo released late was a hip viscous friction with the
+    rotor's inertia beside it, two stand-ins), each earlier effect revisited beside the law. Of the sets found, the
+    smallest whose held-out fit is not clearly worse (paired t below `tie_t`, the sum of E_p, E_v, E_t not worse by `apex_tolerance`, or, given the noise
     `floor`, each within `floor_factor` of it: an effect kept beside the law for a next apex already at the noise
     floor is a stand-in, plant C's leg hysteresis beside a boom friction of 0.007 m/s^2) than the best's; one found
     in place of an effect only where it `replaces` the accepted set as a whole explanation. None where no law
@@ -189,8 +190,10 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     accepted, found = (search.held_out(chosen) if chosen else model), []
     if refit is not None:       # the accepted effects refitted on this search's yardstick (`unused.refitted`)
         accepted = refit(search, chosen, accepted)
-    for left_out in [None] + list(range(len(chosen))):
-        kept = copy.deepcopy([r for k, r in enumerate(chosen) if k != left_out])    # a trial moves magnitudes
+    # beside them all, in place of each, and (two or more) in place of them all: each may have stood in for it
+    leave = [()] + [(k,) for k in range(len(chosen))] + ([tuple(range(len(chosen)))] if len(chosen) > 1 else [])
+    for left_out in leave:
+        kept = copy.deepcopy([r for k, r in enumerate(chosen) if k not in left_out])    # a trial moves magnitudes
         locations, sets = locate(data, search.stack(kept).variant())
         located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
         top = find(search, kept, search.held_out(kept) if kept else model, sets, located)
@@ -200,7 +203,7 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
         if len(trial) > 1:
             revisit(search, trial, Reference(top.held_sse, top.errors))
         held = search.held_out(trial)
-        if left_out is None or acceptance.replaces(held, accepted, model.errors, settings):
+        if not left_out or acceptance.replaces(held, accepted, model.errors, settings):
             found.append((held, trial))
     if not found:
         return None

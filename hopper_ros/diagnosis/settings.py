@@ -59,6 +59,9 @@ class Settings:
     winding_resistances: int = 6     # winding resistances of the hip motor's voltage limit tried (geometric) ...
     winding_resistance_min: float = 0.1    # [ohm] ... from this ...
     winding_resistance_max: float = 2.0    # [ohm] ... to this
+    servo_releases: int = 5          # release times of the flight's position servo after touchdown tried (geometric) ...
+    servo_release_min: float = 0.005       # [s] ... from this ...
+    servo_release_max: float = 0.08        # [s] ... to this
 
 
 _SHARE = {"ge": 0, "le": 1}
@@ -80,7 +83,8 @@ LIMITS = {
     "hysteresis_yield_min": {"gt": 0, "le": 0.1, "unit": "m"},
     "hysteresis_yield_max": {"gt": 0, "le": 0.1, "unit": "m"},
     "winding_resistances": _COUNT, "winding_resistance_min": {"gt": 0, "unit": "ohm"},
-    "winding_resistance_max": {"gt": 0, "unit": "ohm"},
+    "winding_resistance_max": {"gt": 0, "unit": "ohm"}, "servo_releases": _COUNT,
+    "servo_release_min": {"gt": 0, "unit": "s"}, "servo_release_max": {"gt": 0, "unit": "s"},
 }
 
 

@@ -1,8 +1,9 @@
 """Laws of what the model does not use, judged on the trajectory test's noise level (issue 28, point 1): the boom's
 angle about its vertical axis (`azimuth`: the forward position read with an error periodic in it), the leg's
 compression since its last reversal (`hysteresis`: a hysteretic leg force), the leg's angle in flight (`swing`:
-the body's recoil against the leg swung in flight) and the leg's speed beside the command (`backemf`: the drive's
-voltage limiting the motor's current against its back-EMF).
+the body's recoil against the leg swung in flight), the leg's speed beside the command (`backemf`: the drive's
+voltage limiting the motor's current against its back-EMF) and the time since touchdown beside the leg angle
+(`servo`: the flight's position servo released late).
 
 Where the accepted effects, the leg angle's laws (`angle`) and a drift leave the recording not explained, each law
 is fitted (the period by a frequency scan, the yield on a grid, the trajectories choosing) and put in a round with
@@ -22,7 +23,7 @@ import dataclasses
 
 import numpy as np
 
-from . import backemf, hysteresis
+from . import backemf, hysteresis, servo
 from .angle import best_candidate, win_round
 from .azimuth import eccentricity_candidate, find_eccentricity
 from .candidates import Candidate
@@ -76,7 +77,7 @@ def refitted(search: Search, chosen: list[Scored], current: Reference) -> Refere
 
 def find_unused_law(search: Search, chosen: list[Scored], current: Reference, sets, located: set) -> Scored | None:
     """The boom angle's periodic reading error (where its scan stands on held-out strides), the leg's hysteresis,
-    the leg's swing in flight or the drive's voltage limit, where it wins a round beside the accepted effects against the library's (each judged against the accepted
+    the leg's swing in flight, the drive's voltage limit or the servo released late, where it wins a round beside the accepted effects against the library's (each judged against the accepted
     effects `refitted` on this search); None otherwise."""
     settings = search.settings
     stack = search.stack(chosen)
@@ -93,6 +94,7 @@ def find_unused_law(search: Search, chosen: list[Scored], current: Reference, se
         sweep = backemf.sweep_bound(search.data)
         laws.append(best_candidate(search, stack, [backemf.back_emf_candidate(r, constant, command, sweep)
                                                    for r in backemf.resistances(settings)], current))
+    laws.append(servo.best_release(search, stack, current, settings))
     return win_round(search, chosen, current, laws, located, WHAT)
 
 

@@ -116,6 +116,8 @@ class Coefficients:
     drive_voltage: object = 0.0             # V [V] the drive's voltage over the winding, against the back-EMF (0: the
     winding_resistance: object = 1.0        # R [ohm]  current is not limited by it; `voltage_limited`)
     motor_constant: object = 0.627          # k = G k_t [N m/A] at the hip (hardware.yaml: 26 x 0.02411)
+    servo_stiffness: object = 0.0           # K_p [N m/rad] the flight's position servo still holding theta_td ...
+    servo_release: object = 0.0             # t_h [s] ... this long after touchdown (`servo_hold`)
     # discovered terms (coefficients of the term libraries of physics.terms)
     flight_y_terms: tuple = field(default_factory=lambda: zero_terms("flight_y"))
     flight_z_terms: tuple = field(default_factory=lambda: zero_terms("flight_z"))
@@ -176,7 +178,7 @@ def active(c: Coefficients) -> frozenset:
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "spring_cubic", "spring_preload",
          "quadratic_damping", "leg_friction", "leg_hysteresis", "hip_viscous", "hip_friction", "hip_ripple_sin",
          "hip_ripple_cos",
-         "ground_stiffness", "rotor_inertia", "drive_voltage")
+         "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -300,6 +302,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     if is_on(c, "drive_voltage"):
         torque = voltage_limited(c, torque, theta_dot)
     tau = torque + hip_losses(c, theta, theta_dot)
+    if is_on(c, "servo_stiffness"):
+        tau = tau + servo_hold(c, theta, theta_td, since_touchdown)
     if is_on(c, "hip_terms"):
         hip_context = stance_context(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown,
                                      torque, command, 0.0)
@@ -348,6 +352,13 @@ def voltage_limited(c: Coefficients, torque, theta_dot):
     electrical = k * k / r * theta_dot
     stall = k * c.drive_voltage / r
     return where(c.drive_voltage > 0.0, clip(torque, -stall - electrical, stall - electrical), torque)
+
+
+def servo_hold(c: Coefficients, theta, theta_td, since_touchdown):
+    """The flight's position servo released `servo_release` (t_h) after touchdown instead of at it: until then it
+    pulls the sweeping leg back toward the angle it held, -K_p (theta - theta_td) for 0 <= t - t_td < t_h."""
+    held = (since_touchdown >= 0.0) & (since_touchdown < c.servo_release)
+    return where(held, -c.servo_stiffness * (theta - theta_td), 0.0)
 
 
 def rotor_torque(c: Coefficients, tau, force, sin, cos, rho, rho_dot, theta_dot):
