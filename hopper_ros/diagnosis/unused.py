@@ -1,7 +1,8 @@
 """Laws of what the model does not use, judged on the trajectory test's noise level (issue 28, point 1): the boom's
 angle about its vertical axis (`azimuth`: the forward position read with an error periodic in it), the leg's
-compression since its last reversal (`hysteresis`: a hysteretic leg force) and the leg's angle in flight (`swing`:
-the body's recoil against the leg swung in flight).
+compression since its last reversal (`hysteresis`: a hysteretic leg force), the leg's angle in flight (`swing`:
+the body's recoil against the leg swung in flight) and the contact point's motion in stance (`foot`: a round toe
+rolling on the ground).
 
 Where the accepted effects, the leg angle's laws (`angle`) and a drift leave the recording not explained, each law
 is fitted (the period by a frequency scan, the yield on a grid, the trajectories choosing) and put in a round with
@@ -26,6 +27,7 @@ from .angle import best_candidate, win_round
 from .azimuth import eccentricity_candidate, find_eccentricity
 from .candidates import Candidate
 from .dependence import lap_length
+from .foot import foot_candidate
 from .locate import locate
 from .records import Errors, Reference, Scored
 from .search import Search
@@ -74,9 +76,9 @@ def refitted(search: Search, chosen: list[Scored], current: Reference) -> Refere
 
 
 def find_unused_law(search: Search, chosen: list[Scored], current: Reference, sets, located: set) -> Scored | None:
-    """The boom angle's periodic reading error (where its scan stands on held-out strides), the leg's hysteresis or
-    the leg's swing in flight, where it wins a round beside the accepted effects against the library's (each judged against the accepted
-    effects `refitted` on this search); None otherwise."""
+    """The boom angle's periodic reading error (where its scan stands on held-out strides), the leg's hysteresis,
+    the leg's swing in flight or a round toe rolling in stance, where it wins a round beside the accepted effects
+    against the library's (each judged against the accepted effects `refitted` on this search); None otherwise."""
     settings = search.settings
     stack = search.stack(chosen)
     current = refitted(search, chosen, current)
@@ -87,6 +89,7 @@ def find_unused_law(search: Search, chosen: list[Scored], current: Reference, se
     yields = hysteresis.yields(settings)
     laws.append(best_candidate(search, stack, [hysteresis.hysteresis_candidate(x) for x in yields], current))
     laws.append(swing_candidate())
+    laws.append(foot_candidate())
     return win_round(search, chosen, current, laws, located, WHAT)
 
 
