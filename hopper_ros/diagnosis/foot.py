@@ -16,13 +16,25 @@ rho_0 cos(theta - o), odd in theta about o, and shifts the stance's sweep the sa
 the rolling ball shortens the leg toward the ground by r_f (1 - cos theta) at both ends alike and moves the contact
 point forward as the leg sweeps back.
 
+The ramps (2.32) read from the logged torque are timed from the detected touchdown, where a point toe's leg would
+meet the ground (`identification.strides`); the ball meets it earlier, by the time the hip takes to fall
+r_f (1 - cos theta_td) (`ramp_lead`: 0.8 ms median on plant C's 25 mm toe, under the 1 ms from which `data.prepare`
+re-times every ramp from the start of stance). A lane of the law starts its ramp at its own touchdown, so it is
+given the same line started that much earlier (`data.earlier_ramps`), as the drive logged it; where `prepare`
+re-timed the ramps from the start of stance they start there already and are left as they are.
+
 One magnitude, r_f [m], searched like any effect, from 0 to `REACH`; offered where the accepted effects leave the
 recording not explained (`unused`), in a round with the library's effects.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
+from hopper_ros.physics import laws
+
 from .candidates import Candidate
+from .data import earlier_ramps, ramps_retimed
 
 NAME = "foot_radius"        # the candidate's name and the coefficient of r_f [m] (`laws.Coefficients`)
 REACH = 0.05                # [m] the largest r_f searched (a ball of a quarter of the leg's rest length)
@@ -52,3 +64,26 @@ def foot_candidate() -> Candidate:
                      discovery=Foot(),
                      equation="hip = c + (rho - r_f) (-sin theta, cos theta), c = (c_td - r_f (theta - theta_td), "
                               "h + r_f) in (2.9); touchdown at z - h = (rho_0 - r_f) cos theta + r_f")
+
+
+def ramp_lead(coefficients: laws.Coefficients, apex_height, theta_td):
+    """Per lane, how much earlier [s] a round toe meets the ground than the point toe the ramps were timed from: the
+    fall from the apex (2.8, without the small flight damping) to the hip's touchdown height with the ball
+    (`laws.touchdown_height`) and to the point toe's, r_f (1 - cos theta_td) lower (`laws.foot_rise`); 0 where r_f
+    is 0."""
+    ball = laws.touchdown_height(coefficients, theta_td)
+    point = ball - laws.foot_rise(coefficients, theta_td)
+
+    def fall(height):
+        return np.sqrt(2.0 * np.maximum(apex_height - height, 0.0) / coefficients.gravity)
+
+    return fall(point) - fall(ball)
+
+
+def lane_ramps(data, coefficients: laws.Coefficients, apex_height, theta_td, tau_0, ramp_duration):
+    """The ramps (tau_0, t_f) per lane that lanes with a round toe apply from their own touchdown: the recorded ones
+    started `ramp_lead` earlier on the same line, where `data.prepare` left them timed from the model's touchdown;
+    unchanged otherwise, and where no lane has a round toe."""
+    if not np.any(np.asarray(coefficients.foot_radius) != 0.0) or ramps_retimed(data):
+        return tau_0, ramp_duration
+    return earlier_ramps(tau_0, ramp_duration, ramp_lead(coefficients, apex_height, theta_td))

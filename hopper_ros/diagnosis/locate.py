@@ -23,6 +23,7 @@ import numpy as np
 from hopper_ros.physics import lanes, laws
 
 from .data import LEAD_RESOLVED, StrideData
+from .foot import lane_ramps
 from .ringing import ringing, since_liftoff
 from .simulate import BACKLASH, SWING, Variant, hold_direction, variant_key
 from .sites import CHANNEL_SITE, REGISTRY, RESIDUAL_SITES, TRAJECTORY_SITES
@@ -189,10 +190,11 @@ def twins(data: StrideData, variant: Variant, seed: int = 0):
     """The model's own versions of the recorded strides: (clean, noisy) lists of (t, y, z, theta) per stride,
     t from the apex, with the recording's sensor noise and quantisation on the noisy one."""
     s, sensors = data.strides, variant.sensors
-    res = lanes.simulate_lanes(variant.lane_coefficients(len(s)),
-                               (s.apex_height - sensors["z_offset"]) / sensors["z_scale"],
-                               s.forward_speed / sensors["y_scale"], _held_angles(data, sensors), s.tau_0,
-                               s.ramp_duration, duration=data.duration + 0.02)
+    coefficients, held = variant.lane_coefficients(len(s)), _held_angles(data, sensors)
+    apex = (s.apex_height - sensors["z_offset"]) / sensors["z_scale"]
+    tau_0, ramp_duration = lane_ramps(data, coefficients, apex, held, s.tau_0, s.ramp_duration)
+    res = lanes.simulate_lanes(coefficients, apex, s.forward_speed / sensors["y_scale"], held, tau_0, ramp_duration,
+                               duration=data.duration + 0.02)
     rng = np.random.default_rng(seed)
     clean, noisy = [], []
     for i in range(len(s)):
