@@ -138,7 +138,8 @@ def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients)
             else:
                 th = np.arctan2(-(yy - toe_y), zz)
                 thd = (-vy * zz + (yy - toe_y) * vz) / (f.rho * f.rho)
-            ctx = {"rho": f.rho, "rho_dot": -f.sin * vy + f.cos * vz, "theta": th, "theta_dot": thd,
+            ctx = {"rho": f.rho, "rho_dot": f.rho_dot if rolling else -f.sin * vy + f.cos * vz, "theta": th,
+                   "theta_dot": thd,
                    "theta_td": np.full_like(th, theta_td), "since_touchdown": since, "torque": applied,
                    "command": command, "rest_length": float(c.rest_length)}
             u = (tt - td) / max(lo - td, 1e-9) + 1.0
