@@ -125,8 +125,8 @@ def test_the_legs_swing_in_flight_is_the_bodys_recoil_about_the_centre_of_mass(r
 def test_a_round_toe_rolls_its_contact_point_forward_and_lands_at_a_height_even_in_the_leg_angle(recordings):
     """Plant C's toe a ball of 2 cm rolling in stance: the model re-simulated with the rolling contact
     (`foot_radius` at the plant's r_f: the contact point moving r_f per radian, the touchdown r_f (1 - cos theta)
-    higher, the leg force acting from the contact point) brings the next apexes to within a third of the model's
-    errors and does better than half or twice the size. The touchdown height is even in the leg angle (an angle
+    higher, the leg force acting from the contact point) brings the next apexes to within a tenth of the model's
+    errors (a thirtieth here: E_p + E_v + E_t 8.33 -> 0.28 %) and does better than half or twice the size. The touchdown height is even in the leg angle (an angle
     offset's is not). No diagnosis: the law alone (a few seconds)."""
     from hopper_ros.diagnosis.core import start
     from hopper_ros.diagnosis.records import Errors
@@ -144,5 +144,5 @@ def test_a_round_toe_rolls_its_contact_point_forward_and_lands_at_a_height_even_
     sizes = (0.5 * FOOT, FOOT, 2.0 * FOOT)
     sim = simulate_variants(search.data, [search.base.with_changes(coefficients={"foot_radius": v}) for v in sizes])
     errors = [Errors.of(search.data, {k: v[row] for k, v in sim["pred"].items()}).total for row in range(3)]
-    assert errors[1] < model.errors.total / 3, (errors, model.errors)
+    assert errors[1] < model.errors.total / 10, (errors, model.errors)
     assert errors[1] < min(errors[0], errors[2]), errors
