@@ -1,8 +1,9 @@
 """Laws of what the model does not use (`diagnosis.unused`, issue 28 point 1): hysteresis in the leg force (a
 Bouc-Wen element, `laws.hysteresis_rate`) and the forward position read with an error periodic in the boom's angle
 (`simulate.periodic_y`, its period found by a frequency scan), the leg's swing in flight reacting on the body
-(`swing`), a round toe rolling in stance (`foot`, `laws.stance_forces`). Real diagnoses of short recordings (28 strides) of
-plant C (test/plant_c/, written blind) made with its own generator at sizes and seeds the suite does not use."""
+(`swing`), a round toe rolling in stance (`foot`, `laws.stance_forces`). Real diagnoses of short recordings (28
+strides) of plant C (test/plant_c/, written blind) made with its own generator at sizes and seeds the suite does not
+use."""
 
 from __future__ import annotations
 
@@ -45,7 +46,7 @@ def recordings(tmp_path_factory):
         for name, mechanism, seed in (("hysteresis", make("spring_hysteresis", k_h=k_h, x_y=x_y), 4101),
                                       ("eccentricity", make("azimuth_eccentricity", e=e, P=period, phi=phi), 4102),
                                       ("swing", make("leg_swing_reaction", m_l={SWING[0]}, r_c={SWING[1]}), 4103),
-                                      ("foot", make("round_foot", r_f={FOOT}), 4104)):
+                                      ("foot", make("round_foot", r_f={FOOT}), 4105)):
             meas, truth, _ = simulate(name, [mechanism.id], seed, strides={STRIDES}, mechanisms=[mechanism])
             write(Path(sys.argv[1]), name, meas, truth)
         """), str(folder)], check=True, capture_output=True, timeout=300, cwd=PLANT_C)
@@ -126,8 +127,8 @@ def test_a_round_toe_rolls_its_contact_point_forward_and_lands_at_a_height_even_
     """Plant C's toe a ball of 2 cm rolling in stance: the model re-simulated with the rolling contact
     (`foot_radius` at the plant's r_f: the contact point moving r_f per radian, the touchdown r_f (1 - cos theta)
     higher, the leg force acting from the contact point) brings the next apexes to within a tenth of the model's
-    errors (a thirtieth here: E_p + E_v + E_t 8.33 -> 0.28 %) and does better than half or twice the size. The touchdown height is even in the leg angle (an angle
-    offset's is not). No diagnosis: the law alone (a few seconds)."""
+    errors (a twenty-fifth here: E_p + E_v + E_t 8.81 -> 0.33 %) and does better than half or twice the size. The
+    touchdown height is even in the leg angle (an angle offset's is not). No diagnosis: the law alone (a second)."""
     from hopper_ros.diagnosis.core import start
     from hopper_ros.diagnosis.records import Errors
     from hopper_ros.diagnosis.settings import load_settings
