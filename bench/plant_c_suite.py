@@ -6,8 +6,8 @@ nor the issues, with 13 mechanisms outside the library's families (issue 28).
 
 Per concealed mechanism, one of:
 - by mechanism: an accepted effect that is the same law, its magnitude within 25 % (`SAME`: the engine's laws of
-  the leg's hysteresis, of the azimuth encoder's periodic error and of the leg's swing in flight, added after the
-  first score);
+  the leg's hysteresis, of the azimuth encoder's periodic error, of the leg's swing in flight and of a round toe
+  rolling in stance, added after the first score);
 - look-alike: the nearest library law, or discovered terms at a site where the mechanism acts (`NEAR`);
 - missed.
 An accepted effect matching no concealed mechanism is a false verdict; a clean recording is flagged when
@@ -59,6 +59,8 @@ SAME["leg_swing_reaction"] = {"leg_swing": lambda m: m}
 SAME["motor_back_emf"] = {"drive_voltage": lambda m: m}
 # the flight's position servo released late after touchdown (`diagnosis.servo`): its stiffness K_p [N m/rad]
 SAME["servo_handoff"] = {"servo_release": lambda m: m}
+# a round toe rolling in stance (`diagnosis.foot`, `laws.stance_forces`): its radius r_f [m], the mechanism's own magnitude
+SAME["round_foot"] = {"foot_radius": lambda m: m}
 # plant-C mechanism -> the forms of a dependence on the track position (`diagnosis.dependence`) that are its law
 # (by mechanism) and those that are its floor alone (look-alike)
 DEPENDENCES = {"floor_board": ({"board"}, set()), "tilted_pivot": ({"tilt"}, {"wave"})}

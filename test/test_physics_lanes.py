@@ -41,6 +41,9 @@ def _variants() -> list[laws.Coefficients]:
     out += [base.replace(track_gravity=a) for a in (0.13, -0.13)]     # a tilted boom axis (diagnosis.dependence)
     # a Bouc-Wen hysteresis in the leg force (diagnosis.unused), a state of the lanes
     out += [base.replace(leg_hysteresis=f, leg_hysteresis_yield=x) for f, x in ((3.0, 0.002), (10.0, 0.0005))]
+    # a round toe rolling in stance (diagnosis.foot): its centre the toe's state, alone and beside a hip friction
+    out += [base.replace(foot_radius=r) for r in (0.01, 0.03)]
+    out.append(effects.apply(base.replace(foot_radius=0.02), {"hip_dry_friction": 0.05})[0])
     return out
 
 

@@ -108,12 +108,22 @@ def stance_begins(data: "StrideData", window: float = 0.04) -> np.ndarray:
 def _ramp_from_stance_start(strides, lead: float) -> None:
     """The (2.32) ramps read from the logged torque were timed from the model's touchdown; the drive
     started them when stance began, `lead` seconds earlier: the same line, t_f longer by `lead` and
-    tau_0 the ramp's value at its real start. Constant torques (t_f at its cap) are unchanged."""
-    ramp = strides.ramp_duration
-    timed = (strides.tau_0 != 0) & (ramp > 0) & (ramp < ExtractionSettings().max_ramp_duration)
-    new_ramp = np.where(timed, ramp + lead, ramp)
-    strides.tau_0 = np.where(timed, strides.tau_0 * new_ramp / np.where(timed, ramp, 1.0), strides.tau_0)
-    strides.ramp_duration = new_ramp
+    tau_0 the ramp's value at its real start (`earlier_ramps`)."""
+    strides.tau_0, strides.ramp_duration = earlier_ramps(strides.tau_0, strides.ramp_duration, lead)
+
+
+def ramps_retimed(data: "StrideData") -> bool:
+    """Whether `prepare` re-timed the ramps from the start of stance (it began more than `LEAD_RESOLVED` before the
+    model's touchdown), rather than from the model's touchdown."""
+    return not data.rec.commands and data.touchdown_lead > LEAD_RESOLVED
+
+
+def earlier_ramps(tau_0, ramp_duration, lead):
+    """(tau_0, t_f) of (2.32)'s ramps started `lead` seconds earlier on the same line: t_f longer by `lead` and
+    tau_0 the line's value there. Constant torques (t_f at its cap) are unchanged."""
+    timed = (tau_0 != 0) & (ramp_duration > 0) & (ramp_duration < ExtractionSettings().max_ramp_duration)
+    new_ramp = np.where(timed, ramp_duration + lead, ramp_duration)
+    return np.where(timed, tau_0 * new_ramp / np.where(timed, ramp_duration, 1.0), tau_0), new_ramp
 
 
 def own_ramps(data: "StrideData") -> "StrideData":
@@ -202,6 +212,6 @@ def prepare(rec: Recording, params: ModelParams, min_strides: int, liftoff_windo
     data.stance_start = strides.touchdown_time - touchdown_lead
     data.touchdown_lead = float(np.median(touchdown_lead))
     # only an early start is re-timed: a late one is as often the angle channel lagging as the ground lower
-    if not rec.commands and data.touchdown_lead > LEAD_RESOLVED:
+    if ramps_retimed(data):
         _ramp_from_stance_start(strides, data.touchdown_lead)
     return data

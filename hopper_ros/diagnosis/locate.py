@@ -23,6 +23,7 @@ import numpy as np
 from hopper_ros.physics import lanes, laws
 
 from .data import LEAD_RESOLVED, StrideData
+from .foot import lane_ramps
 from .ringing import ringing, since_liftoff
 from .simulate import BACKLASH, SWING, Variant, hold_direction, variant_key
 from .sites import CHANNEL_SITE, REGISTRY, RESIDUAL_SITES, TRAJECTORY_SITES
@@ -69,7 +70,7 @@ def _velocity_at(t, x, t_event, degree):
 def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients) -> StrideResiduals | None:
     """Residual forces of one stride (t from its apex) under the model `c` (floats)."""
     period = float(np.median(np.diff(t)))
-    events = _crossings(t, z - c.rest_length * np.cos(theta))
+    events = _crossings(t, z - c.rest_length * np.cos(theta) - laws.foot_rise(c, theta))
     if events is None:
         return None
     td, lo = events
@@ -107,8 +108,12 @@ def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients)
     # ---- stance
     a, b = i_td, i_lo
     toe_y = np.nan
+    rolling = laws.is_on(c, "foot_radius")    # a round toe: its centre rolls back r_f per radian of the leg angle
     if b - a > 2 * EDGE + 9:
-        toe_y = float(np.median(y[a:b] + z[a:b] * np.tan(theta[a:b])))
+        if rolling:
+            toe_y = float(np.median(_foot_centre(c, y[a:b], z[a:b], theta[a:b]) + c.foot_radius * theta[a:b]))
+        else:
+            toe_y = float(np.median(y[a:b] + z[a:b] * np.tan(theta[a:b])))
         sm_y, sm_z = smooth(y[a:b], STANCE_WINDOW, period), smooth(z[a:b], STANCE_WINDOW, period)
         if sm_y is not None and sm_z is not None:
             keep = slice(EDGE, b - a - EDGE)
@@ -116,18 +121,25 @@ def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients)
             zz, vz, az = (v[keep] for v in sm_z)
             tt = t[a:b][keep]
             since = tt - td
+            toe = toe_y - c.foot_radius * theta[a:b][keep] if rolling else toe_y
             command = laws.ramp_torque(since - float(c.torque_delay), tau_0, t_f)
             applied = laws.actuator_torque(c, command)
-            f = laws.stance_forces(c, yy, zz, vy, vz, 0.0, toe_y, applied, command=command, theta_td=theta_td,
-                                   since_touchdown=since, hysteresis=_hysteresis(c, yy - toe_y, zz))
+            f = laws.stance_forces(c, yy, zz, vy, vz, 0.0, toe, applied, command=command, theta_td=theta_td,
+                                   since_touchdown=since, hysteresis=_hysteresis(c, yy - toe, zz))
             ry, rz = m * (ay - f.ydd), m * (az - f.zdd)
             ry = ry * (1.0 + float(c.horizontal_mass_ratio))
             along = -f.sin * ry + f.cos * rz
             across = -f.cos * ry - f.sin * rz
             hip = across * f.rho
-            th = np.arctan2(-(yy - toe_y), zz)
-            thd = (-vy * zz + (yy - toe_y) * vz) / (f.rho * f.rho)
-            ctx = {"rho": f.rho, "rho_dot": -f.sin * vy + f.cos * vz, "theta": th, "theta_dot": thd,
+            if rolling:     # the hip turns about the contact point (`laws.stance_forces`)
+                dy, hz = laws.foot_offset(c, yy, zz, 0.0, toe)
+                th = np.arctan2(-dy, hz)
+                thd = (-vy * f.cos - vz * f.sin) / (f.rho - c.foot_radius + c.foot_radius * f.cos)
+            else:
+                th = np.arctan2(-(yy - toe_y), zz)
+                thd = (-vy * zz + (yy - toe_y) * vz) / (f.rho * f.rho)
+            ctx = {"rho": f.rho, "rho_dot": f.rho_dot if rolling else -f.sin * vy + f.cos * vz, "theta": th,
+                   "theta_dot": thd,
                    "theta_td": np.full_like(th, theta_td), "since_touchdown": since, "torque": applied,
                    "command": command, "rest_length": float(c.rest_length)}
             u = (tt - td) / max(lo - td, 1e-9) + 1.0
@@ -156,7 +168,12 @@ def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients)
             ang = theta_td
             model = np.array(laws.touchdown_velocity(c, ang, v_pre[0], v_pre[1]), dtype=float)
         else:
-            ang = float(np.arctan2(-(y[pre][-1] - toe_y), z[pre][-1])) if np.isfinite(toe_y) else theta_td
+            if rolling and np.isfinite(toe_y):
+                last = theta[pre][-1]
+                dy, hz = laws.foot_offset(c, y[pre][-1], z[pre][-1], 0.0, toe_y - c.foot_radius * last)
+                ang = float(np.arctan2(-dy, hz))
+            else:
+                ang = float(np.arctan2(-(y[pre][-1] - toe_y), z[pre][-1])) if np.isfinite(toe_y) else theta_td
             model = np.array(laws.liftoff_velocity(c, ang, v_pre[0], v_pre[1]), dtype=float)
         d = v_post - model
         s_, c_ = np.sin(ang), np.cos(ang)
@@ -174,10 +191,11 @@ def twins(data: StrideData, variant: Variant, seed: int = 0):
     """The model's own versions of the recorded strides: (clean, noisy) lists of (t, y, z, theta) per stride,
     t from the apex, with the recording's sensor noise and quantisation on the noisy one."""
     s, sensors = data.strides, variant.sensors
-    res = lanes.simulate_lanes(variant.lane_coefficients(len(s)),
-                               (s.apex_height - sensors["z_offset"]) / sensors["z_scale"],
-                               s.forward_speed / sensors["y_scale"], _held_angles(data, sensors), s.tau_0,
-                               s.ramp_duration, duration=data.duration + 0.02)
+    coefficients, held = variant.lane_coefficients(len(s)), _held_angles(data, sensors)
+    apex = (s.apex_height - sensors["z_offset"]) / sensors["z_scale"]
+    tau_0, ramp_duration = lane_ramps(data, coefficients, apex, held, s.tau_0, s.ramp_duration)
+    res = lanes.simulate_lanes(coefficients, apex, s.forward_speed / sensors["y_scale"], held, tau_0, ramp_duration,
+                               duration=data.duration + 0.02)
     rng = np.random.default_rng(seed)
     clean, noisy = [], []
     for i in range(len(s)):
@@ -368,6 +386,12 @@ def _locate(data: StrideData, variant: Variant) -> tuple[list[Location], tuple]:
     return found, sets
 
 
+def _foot_centre(c, y, z, theta):
+    """A round toe's centre's forward position (`laws.stance_forces`) from the recorded hip and leg angle in stance:
+    r_f above the ground, the hip (rho - r_f) e_rho from it."""
+    return y + (z - c.ground_height - c.foot_radius) * np.tan(theta)
+
+
 def _hysteresis(c, dy: np.ndarray, hz: np.ndarray):
     """The leg's hysteresis state (`laws.hysteresis_rate`) along a stance's recorded compression, from 0 at its first
     sample (0 where the law is off)."""
@@ -398,7 +422,7 @@ def timing_location(data: StrideData, variant: Variant) -> Location | None:
             b = int(np.searchsorted(rec.t, start))
             speed = abs(rec.theta[min(b + 5, len(rec.t) - 1)] - rec.theta[b]) / 0.005
             start = start - play / max(speed, play / 0.02)
-        toe = height[k] - float(c.rest_length) * math.cos(held) - float(c.ground_height)
+        toe = height[k] - float(c.rest_length) * math.cos(held) - float(c.ground_height) - laws.foot_rise(c, held)
         below = np.flatnonzero((toe[1:] <= 0.0) & (toe[:-1] > 0.0))
         if below.size:
             j = below[0]

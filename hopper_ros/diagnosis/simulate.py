@@ -166,8 +166,12 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
         y0 = apex_read - periodic_y(apex_read, a, b, period)[0]
         e0, slope0 = periodic_y(y0, a, b, period)
         speed_read = 1.0 + slope0
-    res = lanes.simulate_lanes(coef, z0, speed0 / sens["y_scale"] / speed_read, theta_td,
-                               np.tile(s.tau_0, nv), np.tile(s.ramp_duration, nv), duration=duration, needed=needed)
+    tau_0, ramp_duration = np.tile(s.tau_0, nv), np.tile(s.ramp_duration, nv)
+    if np.any(coef.foot_radius != 0.0):     # a round toe lands before the point toe the ramps were timed from
+        from .foot import lane_ramps
+        tau_0, ramp_duration = lane_ramps(data, coef, z0, theta_td, tau_0, ramp_duration)
+    res = lanes.simulate_lanes(coef, z0, speed0 / sens["y_scale"] / speed_read, theta_td, tau_0, ramp_duration,
+                               duration=duration, needed=needed)
     if np.any(lift != 0.0):     # ... and read back as the body's, its next apex as the apex fits read it
         m, dy = lift[:, None], geo["dy"]
         res = dataclasses.replace(res, y=(res.y - m * (dy - dy[:, :1])).astype(res.y.dtype),

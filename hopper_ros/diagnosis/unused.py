@@ -2,8 +2,9 @@
 angle about its vertical axis (`azimuth`: the forward position read with an error periodic in it), the leg's
 compression since its last reversal (`hysteresis`: a hysteretic leg force), the leg's angle in flight (`swing`:
 the body's recoil against the leg swung in flight), the leg's speed beside the command (`backemf`: the drive's
-voltage limiting the motor's current against its back-EMF) and the time since touchdown beside the leg angle
-(`servo`: the flight's position servo released late).
+voltage limiting the motor's current against its back-EMF), the time since touchdown beside the leg angle
+(`servo`: the flight's position servo released late) and the contact point's motion in stance (`foot`: a round
+toe rolling on the ground).
 
 Where the accepted effects, the leg angle's laws (`angle`) and a drift leave the recording not explained, each law
 is fitted (the period by a frequency scan, the yield on a grid, the trajectories choosing) and put in a round with
@@ -28,6 +29,7 @@ from .angle import best_candidate, win_round
 from .azimuth import eccentricity_candidate, find_eccentricity
 from .candidates import Candidate
 from .dependence import lap_length
+from .foot import foot_candidate
 from .locate import locate
 from .records import Errors, Reference, Scored
 from .search import Search
@@ -77,7 +79,8 @@ def refitted(search: Search, chosen: list[Scored], current: Reference) -> Refere
 
 def find_unused_law(search: Search, chosen: list[Scored], current: Reference, sets, located: set) -> Scored | None:
     """The boom angle's periodic reading error (where its scan stands on held-out strides), the leg's hysteresis,
-    the leg's swing in flight, the drive's voltage limit or the servo released late, where it wins a round beside the accepted effects against the library's (each judged against the accepted
+    the leg's swing in flight, the drive's voltage limit, the servo released late or a round toe rolling in stance,
+    where it wins a round beside the accepted effects against the library's (each judged against the accepted
     effects `refitted` on this search); None otherwise."""
     settings = search.settings
     stack = search.stack(chosen)
@@ -95,6 +98,7 @@ def find_unused_law(search: Search, chosen: list[Scored], current: Reference, se
         laws.append(best_candidate(search, stack, [backemf.back_emf_candidate(r, constant, command, sweep)
                                                    for r in backemf.resistances(settings)], current))
     laws.append(servo.best_release(search, stack, current, settings))
+    laws.append(foot_candidate())
     return win_round(search, chosen, current, laws, located, WHAT)
 
 

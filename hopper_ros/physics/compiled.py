@@ -128,7 +128,8 @@ for _law in (laws.ramp_torque, laws.smooth_sign, laws.flight_y_term, laws.flight
              laws.stance_forces,
              laws.toe_slip_rate,
              laws.actuator_torque, laws._leg_components, laws._from_components, laws.rotor_spin_up,
-             laws.touchdown_velocity, laws.liftoff_velocity, laws.touchdown_height):
+             laws.touchdown_velocity, laws.liftoff_velocity, laws.touchdown_height, laws.foot_rise,
+             laws.foot_at_touchdown, laws.foot_offset):
     register_jitable(_law)
 
 
@@ -211,7 +212,8 @@ def _rk4(c, t, s, k1, h, mode, apex_found, ground_clearance, t_td, tau_0, t_f, t
 @numba.njit(cache=True, error_model="numpy")
 def _record(c, s, mode, theta_hold, out, lane, j):
     if mode == STANCE:
-        theta = np.arctan2(-(s[0] - s[6]), s[1] - c.ground_height + s[4])
+        dy, hz = laws.foot_offset(c, s[0], s[1], s[4], s[6])
+        theta = np.arctan2(-dy, hz)
     else:
         theta = theta_hold
     out[0, lane, j], out[1, lane, j], out[2, lane, j] = s[0], s[1], theta
@@ -258,10 +260,11 @@ def _lane(c, lane, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h
                     vy, vz = laws.touchdown_velocity(c, theta_hold, s1[2], s1[3])
                     t_td = te
                     theta_at_td = theta_hold
-                    s1 = (s1[0], s1[1], vy, vz, 0.0, 0.0, s1[0] + c.rest_length * np.sin(theta_hold), 0.0)
+                    s1 = (s1[0], s1[1], vy, vz, 0.0, 0.0, laws.foot_at_touchdown(c, s1[0], theta_hold), 0.0)
                     new_mode = STANCE
                 elif mode == STANCE:
-                    theta_lo = np.arctan2(-(s1[0] - s1[6]), s1[1] - c.ground_height + s1[4])
+                    dy, hz = laws.foot_offset(c, s1[0], s1[1], s1[4], s1[6])
+                    theta_lo = np.arctan2(-dy, hz)
                     vy, vz = laws.liftoff_velocity(c, theta_lo, s1[2], s1[3])
                     theta_hold = theta_lo
                     ground_clearance = laws.touchdown_height(c, theta_hold)
@@ -280,9 +283,8 @@ def _lane(c, lane, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h
             s = s1
             t += h
             if mode == STANCE:       # collapse or tipping: the stride failed
-                dy = s[0] - s[6]
-                hz = s[1] - c.ground_height + s[4]
-                rho = np.sqrt(dy * dy + hz * hz)
+                dy, hz = laws.foot_offset(c, s[0], s[1], s[4], s[6])
+                rho = np.sqrt(dy * dy + hz * hz) + c.foot_radius
                 if rho < COLLAPSE_FRACTION * c.rest_length or np.abs(np.arctan2(-dy, hz)) > MAX_LEG_ANGLE:
                     mode = DEAD
                     changed = True

@@ -8,8 +8,8 @@ Identification with effects and the mismatch tool use it; the simulated robot's 
 model integrate the same laws their own way.
 
 State per lane: y, z, y', z', toe depth (compliant ground), applied torque (first-order actuator lag),
-the toe's forward position (it slides on a ground of finite friction), the leg's hysteresis state (reset at
-touchdown, `laws.hysteresis_rate`).
+the toe's forward position (it slides on a ground of finite friction; a round toe's centre, which rolls:
+`laws.stance_forces`), the leg's hysteresis state (reset at touchdown, `laws.hysteresis_rate`).
 Outputs y, z, theta, y', z' every `sample` seconds of the lane's own clock from the apex, the next apex.
 
 Two paths, one result: numba's compilation of the same laws (`physics.compiled`, each lane stepped on its
@@ -182,8 +182,8 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
     out = np.empty((5, n, samples), dtype=np.float32)
 
     def record(j):
-        dy = S[0] - S[6]
-        th = np.where(mode == STANCE, np.arctan2(-dy, S[1] - c.ground_height + S[4]), theta_hold)
+        dy, hz = laws.foot_offset(c, S[0], S[1], S[4], S[6])
+        th = np.where(mode == STANCE, np.arctan2(-dy, hz), theta_hold)
         out[0, :, j], out[1, :, j], out[2, :, j], out[3, :, j], out[4, :, j] = S[0], S[1], th, S[2], S[3]
 
     with np.errstate(all="ignore"):
@@ -204,7 +204,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
                     td = ev & (mode == DESCENT)
                     if td.any():
                         vy, vz = laws.touchdown_velocity(c, theta_hold, S1[2], S1[3])
-                        S1[6, td] = (S1[0] + rho0 * np.sin(theta_hold))[td]
+                        S1[6, td] = laws.foot_at_touchdown(c, S1[0], theta_hold)[td]
                         t_td[td] = te[td]
                         theta_at_td[td] = theta_hold[td]
                         S1[2, td], S1[3, td] = vy[td], vz[td]
@@ -214,8 +214,8 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
                         newmode[td] = STANCE
                     lo = ev & (mode == STANCE)
                     if lo.any():
-                        dy = S1[0] - S1[6]
-                        theta_lo = np.arctan2(-dy, S1[1] - c.ground_height + S1[4])
+                        dy, hz = laws.foot_offset(c, S1[0], S1[1], S1[4], S1[6])
+                        theta_lo = np.arctan2(-dy, hz)
                         vy, vz = laws.liftoff_velocity(c, theta_lo, S1[2], S1[3])
                         theta_hold[lo] = theta_lo[lo]
                         t_lo[lo] = te[lo]
@@ -233,9 +233,8 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
                 t += h
                 st = mode == STANCE
                 if st.any():    # collapse or tipping: the stride failed
-                    dy = S[0] - S[6]
-                    hz = S[1] - c.ground_height + S[4]
-                    rho = np.sqrt(dy * dy + hz * hz)
+                    dy, hz = laws.foot_offset(c, S[0], S[1], S[4], S[6])
+                    rho = np.sqrt(dy * dy + hz * hz) + c.foot_radius
                     dead = st & ((rho < COLLAPSE_FRACTION * rho0) | (np.abs(np.arctan2(-dy, hz)) > MAX_LEG_ANGLE))
                     mode[dead] = DEAD
             record(j)

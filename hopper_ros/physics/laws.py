@@ -101,6 +101,7 @@ class Coefficients:
     ground_stiffness: object = 0.0          # k_g [N/m], 0 = rigid ground
     ground_damping: object = 250.0          # d_g [N s/m]
     ground_friction: object = math.inf      # mu [1]: the toe slides where |G_y| > mu G_z (inf: it never slips)
+    foot_radius: object = 0.0               # r_f [m]: the toe a ball of radius r_f rolling on the ground
     # the hip actuator
     torque_gain: object = 1.0               # applied / commanded
     torque_offset: object = 0.0             # [N m] added in stance
@@ -178,7 +179,7 @@ def active(c: Coefficients) -> frozenset:
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "spring_cubic", "spring_preload",
          "quadratic_damping", "leg_friction", "leg_hysteresis", "hip_viscous", "hip_friction", "hip_ripple_sin",
          "hip_ripple_cos",
-         "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness")
+         "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness", "foot_radius")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -291,14 +292,41 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     massless toe with k_g depth + d_g depth' = the force's vertical component; depth' enters rho'. On a
     ground of finite friction the toe slides (`toe_slip_rate`); its speed enters rho' the same way.
     `compliant` (per lane) defaults to ground_stiffness > 0.
+
+    A round toe (`foot_radius` r_f > 0): the leg's end is a ball of radius r_f, rigid with the leg, that rolls on
+    the ground without slipping. `toe_y` is then the ball's centre, r_f above the ground (`foot_offset`), the hip
+    at (rho - r_f) e_rho from it, and the centre moves -r_f theta' (the contact point rolls r_f per radian the
+    leg turns: forward as the leg sweeps back), a state like the sliding toe's. The contact point P is r_f below
+    the centre, the hip at (rho - r_f) e_rho + r_f e_z from it, so (2.9)'s kinematics become, with
+    a = rho - r_f + r_f cos theta (the hip's distance from P along the leg):
+
+        v = (rho' + r_f sin theta theta') e_rho + a theta' e_theta
+        => theta' = v . e_theta / a,   rho' = v . e_rho - r_f sin theta theta'
+
+    The massless leg passes the ground's force at P to the hip: F along the leg (2.9's spring and damper in
+    rho), and across it what balances tau about the hip, (P - hip) x G + tau = 0:
+
+        m y'' = (F e_rho,y + X e_theta,y) / (1 + r),   m z'' = F e_rho,z + X e_theta,z - m g,
+        X = (tau - r_f F sin theta) / a
+
+    (X = tau/rho at r_f = 0; the body's power F rho' + tau theta', as in (2.9)'s Lagrangian: the same equations
+    with p = c + (rho - r_f) e_rho and c = (c_td - r_f (theta - theta_td), r_f) in (2.9)'s L.) The touchdown
+    comes r_f (1 - cos theta) higher (`touchdown_height`, the guard of (2.3)) and lift-off is (2.28)'s, in rho.
+    Beside a compliant ground, a sliding toe or a rotor's inertia the ball's rolling is added to their laws as
+    they are written for a point toe.
     """
-    dy = y - toe_y
-    hz = z - c.ground_height + depth
+    dy, hz = foot_offset(c, y, z, depth, toe_y)
     rho = np.sqrt(dy * dy + hz * hz)
     sin, cos = -dy / rho, hz / rho
     approach = -sin * ydot + cos * zdot                     # rho' with the toe at rest
     theta = np.arctan2(-dy, hz)
     theta_dot = (-ydot * hz + dy * zdot) / (rho * rho)
+    arm = rho
+    if is_on(c, "foot_radius"):     # the ball rolls: the hip turns about the contact point, r_f below the centre
+        arm = rho + c.foot_radius * cos
+        theta_dot = (-ydot * cos - zdot * sin) / arm
+        approach = approach - c.foot_radius * sin * theta_dot
+        rho = rho + c.foot_radius
     if is_on(c, "drive_voltage"):
         torque = voltage_limited(c, torque, theta_dot)
     tau = torque + hip_losses(c, theta, theta_dot)
@@ -329,6 +357,9 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
         toe_rate = toe_slip_rate(c, spring_only - c.damping * rho_dot, across, sin, cos)
         rho_dot = rho_dot + sin * toe_rate
     force = spring_only - c.damping * rho_dot
+    if is_on(c, "foot_radius"):     # the force acts from the contact point: X balances tau about the hip
+        across = (tau - c.foot_radius * force * sin) / arm
+        toe_rate = toe_rate - c.foot_radius * theta_dot
     ydd = (-force * sin - across * cos) / (c.mass * (1.0 + c.horizontal_mass_ratio))
     if is_on(c, "track_gravity"):
         ydd = ydd + c.track_gravity
@@ -486,8 +517,32 @@ def liftoff_velocity(c: Coefficients, theta, ydot, zdot):
 
 
 def touchdown_height(c: Coefficients, theta):
-    """Body height at which the toe, at rest length and angle theta, meets the ground."""
-    return c.ground_height + c.rest_length * np.cos(theta)
+    """Body height at which the toe, at rest length and angle theta, meets the ground (the guard of (2.3)): a round
+    toe (`foot_radius` r_f) meets it at (rho_0 - r_f) cos theta + r_f, r_f (1 - cos theta) higher, even in theta
+    (an offset o of the angle's reading would give rho_0 cos(theta - o), which is not)."""
+    height = c.ground_height + c.rest_length * np.cos(theta)
+    if is_on(c, "foot_radius"):
+        height = height + foot_rise(c, theta)
+    return height
+
+
+def foot_rise(c: Coefficients, theta):
+    """How much higher the hip meets the ground with a round toe (`foot_radius` r_f) than with a point toe at the
+    leg's end, the leg at rest length and angle theta: r_f (1 - cos theta) (0 for a point toe)."""
+    return c.foot_radius * (1.0 - np.cos(theta))
+
+
+def foot_at_touchdown(c: Coefficients, y, theta):
+    """Forward position of the toe's point the stance turns about (`stance_forces`' toe_y) for the hip at y and the
+    leg at rest length and angle theta: the toe, or a round toe's centre, (rho_0 - r_f) sin theta ahead."""
+    return y + (c.rest_length - c.foot_radius) * np.sin(theta)
+
+
+def foot_offset(c: Coefficients, y, z, depth, toe_y):
+    """(dy, hz): the hip less the toe's point the stance turns about (`stance_forces`' toe_y, at the ground less
+    `depth`; a round toe's centre r_f above it); the leg angle in stance is arctan2(-dy, hz), the leg's length
+    sqrt(dy^2 + hz^2) + r_f."""
+    return y - toe_y, z - c.ground_height + depth - c.foot_radius
 
 
 def swing_offset(theta, theta_ref):
