@@ -158,7 +158,8 @@ def test_a_hip_torque_limited_by_the_drives_voltage_is_the_back_emf_not_a_satura
     voltage, resistance = BACK_EMF
     k = backemf.motor_constant()
     variants = [search.base.with_changes(coefficients={"drive_voltage": v, "winding_resistance": resistance,
-                                                       "motor_constant": k}) for v in (0.5 * voltage, voltage, 2 * voltage)]
+                                                       "motor_constant": k})
+                for v in (0.5 * voltage, voltage, 2 * voltage)]
     variants.append(search.base.with_changes(coefficients={"torque_limit": k * voltage / resistance}))
     sim = simulate_variants(search.data, variants)
     errors = [Errors.of(search.data, {key: v[row] for key, v in sim["pred"].items()}).total for row in range(4)]
@@ -188,7 +189,8 @@ def test_a_servo_released_late_pulls_the_leg_back_early_in_stance_only(recording
              (stiffness, 0.5 * release)]
     sim = simulate_variants(search.data, [search.base.with_changes(
         coefficients={"servo_stiffness": k, "servo_release": t}) for k, t in sizes])
-    errors = [Errors.of(search.data, {key: v[row] for key, v in sim["pred"].items()}).total for row in range(len(sizes))]
+    errors = [Errors.of(search.data, {key: v[row] for key, v in sim["pred"].items()}).total
+              for row in range(len(sizes))]
     assert errors[1] < model.errors.total / 3, (errors, model.errors)
     assert errors[1] < min(errors[:1] + errors[2:]), errors
 

@@ -230,7 +230,7 @@ def test_sigterm_stops_sim_robot_whatever_its_hub_clients_do(hopper_cli):
     assert "stopping on SIGTERM" in node.stderr
 
 
-# --------------------------------------------------------------------------- in-process: the stepping thread's callbacks
+# ------------------------------------------------------------------ in-process: the stepping thread's callbacks
 # Issue 29: under load a stance whose ramp torque reached the leg late (said as a warning) followed one said at
 # info from the same call site; rclpy raised "Logger severity cannot be changed between calls", the stepping
 # thread died, the robot stood still while its node lived on, and the demo never hopped again.

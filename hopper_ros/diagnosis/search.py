@@ -152,8 +152,7 @@ class Search:
     def refine(self, stack: Stack, ranking: list[Scored], reference: Reference, exact: int = 12) -> list[Scored]:
         """Every candidate again on a fine grid between the neighbours of its best grid value (an SSE is not
         parabolic where an effect switches on, e.g. a torque limit; a candidate with `refinements` n > 1 n times,
-        each grid finer), then the best scored from strides simulated
-        at their fold magnitudes (no interpolation)."""
+        each grid finer), then the best scored from strides simulated at their fold magnitudes (no interpolation)."""
         ranking = self._finer(stack, ranking, reference, ranking)
         for passes in range(1, max((r.candidate.refinements for r in ranking), default=1)):
             ranking = self._finer(stack, ranking, reference, [r for r in ranking if r.candidate.refinements > passes])

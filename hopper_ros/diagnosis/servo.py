@@ -6,9 +6,10 @@ late), pulling the sweeping leg back toward that angle: `laws.servo_hold`, in st
 
 A viscous hip friction (`hip_viscous_friction`) or the rotor's inertia (`rotor_inertia`) takes torque through the
 whole stance; this only at its start. Where the accepted effects leave the recording not explained (the stage of
-`unused.find_unused_law`, in its round with the library's effects, those among them): K_p searched at each release time
-t_h of a geometric grid (`servo_releases` from `servo_release_min` to `servo_release_max`, then twice as many between the
-best one's neighbours twice as densely), the t_h the held-out trajectories fit best kept, then guarded and refitted like any effect.
+`unused.find_unused_law`, in its round with the library's effects, those among them): K_p searched at each release
+time t_h of a geometric grid (`servo_releases` from `servo_release_min` to `servo_release_max`, then twice as many
+between the best one's neighbours), the t_h the held-out trajectories fit best kept, then guarded and refitted like
+any effect.
 """
 
 from __future__ import annotations

@@ -53,7 +53,8 @@ class SimRunner:
     def __init__(self, config, hardware: HardwareConfig, *, mode: str = "realtime", can: str = "hub",
                  can_port: int | None = None, udp_host: str = "127.0.0.1", udp_port: int | None = None,
                  duration: float = 0.0, experiments: bool = False, throw_lead: float = 0.05,
-                 on_sample: Callable[[SimSample], None] = lambda sample: None, on_done: Callable[[], None] = lambda: None,
+                 on_sample: Callable[[SimSample], None] = lambda sample: None,
+                 on_done: Callable[[], None] = lambda: None,
                  on_failure: Callable[[BaseException], None] = lambda exc: None):
         if mode not in MODES:
             raise ValueError(f"mode must be realtime or lockstep, got {mode!r}")
