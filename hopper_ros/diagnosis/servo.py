@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .angle import best_candidate
 from .candidates import Candidate
 from .simulate import Variant
 
@@ -33,8 +34,6 @@ def best_release(search, stack, current, settings) -> Candidate:
     """The candidate of the release time the held-out trajectories fit best: on `releases`, then again on twice as
     many between the best one's neighbours (the pull's impulse grows with t_h as with K_p; only the right t_h leaves
     the rest of the stance alone)."""
-    from .angle import best_candidate
-
     coarse = releases(settings)
     best = best_candidate(search, stack, [servo_candidate(t) for t in coarse], current)
     k = int(np.argmin(np.abs(coarse - best.discovery.release)))
