@@ -77,6 +77,7 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         assert (flight.mode, flight.setpoint) == (MotorCommand.MODE_POSITION, pytest.approx(decision.touchdown_angle))
         # pre-touchdown, heard ahead of its time: at that time the leg is let go and the ramp goes out,
         # stamped with the touchdown predicted from the event's state
+        clock.publish(Float64(data=5.0))            # the sensing clock's mapping before the stand-still below
         pre_touchdown = GaitEvent(type=GaitEvent.PRE_TOUCHDOWN)
         soon = time.time() + 0.3                  # host clock: a prediction in the past would be cancelled
         pre_touchdown.header.stamp = stamp(soon)
@@ -93,8 +94,7 @@ def test_controller_decides_at_apex_and_drives_the_stride(rclpy_session, hopper_
         assert soon < expected < soon + 0.01
         # the sensing clock re-anchors by an 80 ms stand-still (state_estimator's clock_offset): the ramp
         # predicted on the robot's clock follows at once, and the command says which mapping it is on
-        clock.publish(Float64(data=5.0))
-        spin_until(executor, lambda: False, timeout=0.1)
+        # (at once: the ramp is cancelled touchdown_grace + 80 ms after the predicted touchdown, some 10 ms away)
         clock.publish(Float64(data=5.08))
         moved = tick(after=ahead)
         assert moved.mode == MotorCommand.MODE_RAMP and moved.clock_offset == 5.08
