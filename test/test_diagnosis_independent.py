@@ -14,51 +14,69 @@ from hopper_ros.diagnosis import diagnose_file
 from hopper_ros.diagnosis.settings import Settings
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
-from diagnosis_suite import _expected, score  # noqa: E402
+from diagnosis_suite import score  # noqa: E402
 from independent_plant.suite import write_suite  # noqa: E402
 
 pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
 
 SUBSET = ("clean_1", "flight_air_drag", "actuator_saturation", "leg_slide_coulomb", "leg_rest_length", "other_flight_lift",
-          "other_ground_higher", "other_tether", "other_boom_bending", "sensor_z_delay", "pair_drag_gain",
-          "pair_toemass_delay", "pair_stiffness_thetaoffset", "other_hip_torsion_spring", "other_toe_slip")
+          "other_ground_higher", "other_tether", "other_boom_bending", "sensor_z_delay", "other_toe_slip")
+# the pairs and the hip's torsion spring, which restart the rounds: test_diagnosis_independent_pairs.py (a module of
+# their own, so that `make test` runs them in its other compute session, tools/test.sh)
 
 
-@pytest.fixture(scope="module")
-def suite(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("independent")
-    write_suite(folder, SUBSET)
+def diagnosed(folder: Path, names: tuple) -> dict:
+    """name -> (truth, diagnosis, score, folder) of the independent plant's recordings `names`, written to `folder`
+    (the verdict's JSON beside each)."""
+    write_suite(folder, names)
     out = {}
-    for name in SUBSET:
+    for name in names:
         truth = json.loads((folder / f"{name}.json").read_text())
         result = diagnose_file(folder / f"{name}.csv", json_path=folder / f"{name}.verdict.json")
         out[name] = (truth, result, score(result, truth, Settings().locate_threshold), folder)
     return out
 
 
-@pytest.mark.parametrize("name", SUBSET)
-def test_every_concealed_effect_named_and_nothing_else(suite, name):
+@pytest.fixture(scope="module")
+def suite(tmp_path_factory):
+    return diagnosed(tmp_path_factory.mktemp("independent"), SUBSET)
+
+
+def named_and_nothing_else(suite: dict, name: str) -> None:
     truth, result, s, _ = suite[name]
     assert not s["misses"], f"{name}: missed {s['misses']}; verdict: {result.verdict}"
     assert not s["false_positives"], f"{name}: named what is not there {s['false_positives']}; {result.verdict}"
 
 
-@pytest.mark.parametrize("name", SUBSET)
-def test_held_out_apex_never_worse(suite, name):
+def held_out_apex_never_worse(suite: dict, name: str) -> None:
     _, result, _, _ = suite[name]
     for key in ("E_p", "E_v", "E_t"):
         assert getattr(result.after, key) <= getattr(result.before, key) * 1.01 + 1e-6, (key, result.before, result.after)
 
 
-def test_located_where_the_effects_act(suite):
+def located_where_it_acts(suite: dict, name: str) -> None:
     """By force or, where the residual is within the noise one stride at a time (a torque limit clips only the
     start of some stances), by fit."""
-    for name in SUBSET:
-        truth, result, s, _ = suite[name]
-        if truth["effects"]:
-            assert s["located"], f"{name}: not located ({[l.words() for l in result.location[:3]]})"
-        else:
-            assert all(loc.ratio < Settings().locate_threshold for loc in result.location), name
+    truth, result, s, _ = suite[name]
+    if truth["effects"]:
+        assert s["located"], f"{name}: not located ({[l.words() for l in result.location[:3]]})"
+    else:
+        assert all(loc.ratio < Settings().locate_threshold for loc in result.location), name
+
+
+@pytest.mark.parametrize("name", SUBSET)
+def test_every_concealed_effect_named_and_nothing_else(suite, name):
+    named_and_nothing_else(suite, name)
+
+
+@pytest.mark.parametrize("name", SUBSET)
+def test_held_out_apex_never_worse(suite, name):
+    held_out_apex_never_worse(suite, name)
+
+
+@pytest.mark.parametrize("name", SUBSET)
+def test_located_where_the_effects_act(suite, name):
+    located_where_it_acts(suite, name)
 
 
 def test_json_verdict(suite):
@@ -87,53 +105,6 @@ def test_stance_start_from_the_held_leg(suite):
     assert 0.003 < higher.data.touchdown_lead < 0.005, higher.data.touchdown_lead
     assert abs(clean.data.touchdown_lead) < 0.001, clean.data.touchdown_lead
     assert higher.chosen[0].name in ("ground_height", "z_offset"), higher.verdict
-
-
-def test_pair_both_named_with_the_first_refitted(suite):
-    """A torque gain of 0.85 and quadratic drag together: fitted alone, the gain (0.80) stands in for the drag
-    too; refitted beside the drag it returns to 0.85 and both are named within 20 %."""
-    truth, result, s, _ = suite["pair_drag_gain"]
-    assert len(s["hits"]) == 2, result.verdict
-    gain = next(r for r in result.chosen if r.name == "torque_gain")
-    assert abs(gain.magnitude - 0.85) < 0.02, gain.magnitude
-
-
-def test_restart_when_the_first_choice_stands_in_for_a_pair(suite):
-    """A toe mass and an actuation delay: alone, a torque gain fits both better than either (the delay alone
-    makes the next apex's timing worse), and nothing on top of the gain explains the rest. The residual left
-    starts the rounds again from the runners-up, and the pair is named."""
-    truth, result, s, _ = suite["pair_toemass_delay"]
-    greedy = max((r for r in result.rounds[0] if r.significant), key=lambda r: r.reduction)
-    assert greedy.name not in {_expected(e)[0] for e in truth["effects"]}, greedy.name
-    assert len(s["hits"]) == 2 and not s["false_positives"], result.verdict
-
-
-def test_restart_from_a_sensor_fault_when_the_rounds_fill_up(suite):
-    """A stiffer leg and a theta encoder's offset: the first round's best is a torque offset (the offset's
-    look-alike about the hip) and two more effects patch what it leaves until every round is used. A set that
-    fills the rounds starts them again from the runners-up, a real sensor's fault among them; the set from the
-    theta offset fits the held-out strides better as a whole (it trades a little E_p for E_v and E_t) and
-    replaces it: both named within 20 %, nothing else."""
-    truth, result, s, _ = suite["pair_stiffness_thetaoffset"]
-    greedy = max((r for r in result.rounds[0] if r.significant), key=lambda r: r.reduction)
-    assert greedy.name not in {_expected(e)[0] for e in truth["effects"]}, greedy.name
-    assert len(s["hits"]) == 2 and not s["false_positives"], result.verdict
-    assert [r.candidate.kind for r in result.chosen].count("sensor") == 1, result.verdict
-
-
-def test_terms_that_fit_better_than_the_library_replace_its_look_alike_and_patch(suite):
-    """A torsional spring at the hip: the first round names a torque offset (the discovered term fits better, but
-    a discovered set must beat the library by a margin to take its name) and a theta scale patches what the offset
-    leaves. The discovered term alone fits the held-out strides better than that pair, so the rounds restarted
-    from it replace both: the plant's own law, with its stiffness, and nothing else."""
-    truth, result, s, _ = suite["other_hip_torsion_spring"]
-    greedy = max((r for r in result.rounds[0] if r.significant), key=lambda r: r.reduction)
-    assert greedy.candidate.kind != "discovered", greedy.name
-    assert [r.candidate.kind for r in result.chosen] == ["discovered"], result.verdict
-    entry = result.chosen[0]
-    terms = {key: coef * entry.value for key, coef, _, _ in entry.candidate.discovery.terms()}
-    kappa = truth["effects"][0]["magnitude"]
-    assert set(terms) == {"theta"} and abs(-terms["theta"] - kappa) <= 0.2 * kappa, terms
 
 
 def _effect(truth):

@@ -196,7 +196,8 @@ def test_sigint_disables_the_drive_first(rclpy_session, hopper_cli, drive, drive
     node, executor, got, command = _test_node(rclpy_session, "motor_driver_sigint_test")
     try:
         command(MotorCommand.MODE_POSITION, 0.05, 0.1,
-                until=lambda: drive.drive.state is State.OPERATION_ENABLED and drive.drive.operation_mode == -1)
+                until=lambda: drive.drive.state is State.OPERATION_ENABLED and drive.drive.operation_mode == -1,
+                seen=lambda: _seen(drive, got, process))
         assert drive.drive.value(eo.POSITION_MODE_SETTING_VALUE) == round(0.05 * 52000 / (2 * math.pi))
         process.signal(signal.SIGINT)
         command(MotorCommand.MODE_POSITION, 0.05, 0.2)

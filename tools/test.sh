@@ -1,25 +1,46 @@
 #!/usr/bin/env bash
-# `make test`: the suite as two pytest sessions side by side on this 2-core machine.
-# - The node tests (real rclpy nodes, sockets, subprocesses: about one core, much of it waiting) in the
-#   foreground, at normal priority, so their timing is what it was when they ran alone.
-# - The CPU-bound diagnosis tests (`pytestmark = pytest.mark.compute`; numba kernels on both cores) beside
-#   them at nice 19: they take what the node tests leave idle, then both cores once those are done.
-# Both report; the exit status fails if either session failed. `pytest test` alone still runs everything.
+# `make test`: the suite as three pytest sessions side by side on this 2-core machine.
+# - The node tests (real rclpy nodes, sockets, subprocesses: about one core, 430 CPU-s in 404 s measured
+#   alone) in the foreground, at normal priority, so their timing is what it was when they ran alone.
+# - The CPU-bound diagnosis tests (`pytestmark = pytest.mark.compute`) beside them at nice 19, as two
+#   sessions of one numba thread each, of about equal CPU (FIRST's modules; every other compute module).
+#   They take what the node tests leave idle, then a core each once those are done. One session of two
+#   threads stalled: a parallel kernel waits for its slowest thread, and a nice-19 thread on the core a
+#   node test holds gets about 1/70 of it (a diagnosis beside one busy loop: 22.8 s with two threads,
+#   16.1 s with one; 9.9 s with two on an idle machine).
+# All report; the exit status fails if any session failed. `pytest test` alone still runs everything.
 set -u
 cd "$(dirname "${BASH_SOURCE[0]}")/.." || exit 1
 PYTHON=.venv/bin/python
 ARGS=(-q -p no:cacheprovider --durations=15)
-log=$(mktemp "${TMPDIR:-/tmp}/hopper_ros-compute-tests.XXXXXX")
-nice -n 19 "$PYTHON" -m pytest "${ARGS[@]}" -m compute test >"$log" 2>&1 &
-compute=$!
-trap 'kill "$compute" 2>/dev/null; rm -f "$log"' EXIT
+FIRST=(test/test_diagnosis_independent.py test/test_diagnosis.py test/test_plant_b.py)
+logs=()
+pids=()
+trap 'kill "${pids[@]}" 2>/dev/null; rm -f "${logs[@]}"' EXIT
 trap 'exit 130' INT TERM
-echo "== node and unit tests (the compute-bound ones run beside them at nice 19; their report follows)"
+compute() {     # compute LABEL PYTEST-ARGS...: one niced single-threaded session in the background
+    local log
+    log=$(mktemp "${TMPDIR:-/tmp}/hopper_ros-compute-tests.XXXXXX")
+    echo "$1" >"$log"
+    shift
+    NUMBA_NUM_THREADS=1 nice -n 19 "$PYTHON" -m pytest "${ARGS[@]}" -m compute "$@" >>"$log" 2>&1 &
+    pids+=($!)
+    logs+=("$log")
+}
+compute "== compute-bound tests, first session" "${FIRST[@]}"
+compute "== compute-bound tests, second session" "${FIRST[@]/#/--ignore=}" test
+echo "== node and unit tests (the compute-bound ones run beside them at nice 19; their reports follow)"
 "$PYTHON" -m pytest "${ARGS[@]}" -m "not compute" test
 nodes=$?
-wait "$compute"
-computed=$?
-echo "== compute-bound tests (diagnosis)"
-cat "$log"
-echo "== make test: node and unit tests exit $nodes, compute-bound tests exit $computed"
-[ "$nodes" -eq 0 ] && [ "$computed" -eq 0 ]
+status=("node and unit tests exit $nodes")
+failed=$((nodes != 0))
+for k in "${!pids[@]}"; do
+    wait "${pids[$k]}"
+    code=$?
+    cat "${logs[$k]}"
+    status+=("compute-bound session $((k + 1)) exit $code")
+    [ "$code" -eq 0 ] || failed=1
+done
+pids=()
+echo "== make test: $(IFS=,; echo "${status[*]}" | sed 's/,/, /g')"
+[ "$failed" -eq 0 ]
