@@ -95,7 +95,13 @@ def test_sigkill_loses_at_most_the_last_chunk(rclpy_session, hopper_cli, tmp_pat
                           "--chunk-interval", str(interval))
     try:
         recorder.wait_for_line(r"subscribed to /body_measurement")
-        # two seconds' worth of messages after the subscription (a loaded machine publishes late: count, not time)
+        # the subscription created is not yet matched: on a loaded machine (CI) discovery took long enough that only
+        # the last 28 of the messages counted from the line reached the recorder; count from the match
+        deadline = time.monotonic() + 20.0
+        while not publisher.get_subscription_count() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert publisher.get_subscription_count(), "the recorder's subscription never matched the publisher"
+        # two seconds' worth of messages after the match (a loaded machine publishes late: count, not time)
         start, deadline = published[0], time.monotonic() + 20.0
         while published[0] - start < 2 * rate and time.monotonic() < deadline:
             time.sleep(0.05)
