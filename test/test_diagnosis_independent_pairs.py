@@ -5,8 +5,9 @@ torsion spring. A module of their own so that `make test` runs them in its secon
 
 import pytest
 
-from test_diagnosis_independent import diagnosed, held_out_apex_never_worse, located_where_it_acts, \
-    named_and_nothing_else
+from test_diagnosis_independent import (  # noqa: F401 (the three tests run here on this module's SUBSET)
+    diagnosed, pytest_generate_tests, test_every_concealed_effect_named_and_nothing_else, test_held_out_apex_never_worse,
+    test_located_where_the_effects_act)
 from diagnosis_suite import _expected  # noqa: E402 (bench/ is on sys.path once that module is imported)
 
 pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
@@ -17,21 +18,6 @@ SUBSET = ("pair_drag_gain", "pair_toemass_delay", "pair_stiffness_thetaoffset", 
 @pytest.fixture(scope="module")
 def suite(tmp_path_factory):
     return diagnosed(tmp_path_factory.mktemp("independent_pairs"), SUBSET)
-
-
-@pytest.mark.parametrize("name", SUBSET)
-def test_every_concealed_effect_named_and_nothing_else(suite, name):
-    named_and_nothing_else(suite, name)
-
-
-@pytest.mark.parametrize("name", SUBSET)
-def test_held_out_apex_never_worse(suite, name):
-    held_out_apex_never_worse(suite, name)
-
-
-@pytest.mark.parametrize("name", SUBSET)
-def test_located_where_the_effects_act(suite, name):
-    located_where_it_acts(suite, name)
 
 
 def test_pair_both_named_with_the_first_refitted(suite):
