@@ -182,10 +182,10 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     and of two or more in place of them all (plant C's servo released late was a hip viscous friction with the
     rotor's inertia beside it, two stand-ins), each earlier effect revisited beside the law. Of the sets found, the
     smallest whose held-out fit is not clearly worse (paired t below `tie_t`, the sum of E_p, E_v, E_t not worse by
-    `apex_tolerance`, or, given the noise `floor`, each within `floor_factor` of it: an effect kept beside the law for a next apex already at the noise
-    floor is a stand-in, plant C's leg hysteresis beside a boom friction of 0.007 m/s^2) than the best's; one found
-    in place of an effect only where it `replaces` the accepted set as a whole explanation. None where no law
-    passes its guards."""
+    `apex_tolerance`, or, given the noise `floor`, each within `floor_factor` of it: an effect kept beside the law
+    for a next apex already at the noise floor is a stand-in, plant C's leg hysteresis beside a boom friction of
+    0.007 m/s^2) than the best's; one found in place of an effect only where it `replaces` the accepted set as a
+    whole explanation. None where no law passes its guards."""
     settings, data = search.settings, search.data
     accepted, found = (search.held_out(chosen) if chosen else model), []
     if refit is not None:       # the accepted effects refitted on this search's yardstick (`unused.refitted`)

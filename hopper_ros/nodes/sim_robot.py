@@ -153,7 +153,8 @@ class SimRobotNode(Node):
         stances.add(sample, self.robot.current_mode, self.runner.behind)
         if stances.stances > closed and not stances.onsets[-1] <= SAID_AFTER:
             onset, behind = stances.onsets[-1], stances.behind
-            log_event(self.get_logger(), "info" if onset <= stances.late_after else "warning", f"stance ending at t = {truth.t:.3f} s: " + (
+            level = "info" if onset <= stances.late_after else "warning"
+            log_event(self.get_logger(), level, f"stance ending at t = {truth.t:.3f} s: " + (
                 "no ramp torque reached the leg" if onset != onset else
                 f"the ramp torque reached the leg {onset * 1e3:.1f} ms after the touchdown (the robot ran "
                 f"{behind * 1e3:.1f} ms behind its clock at most until then)"))
