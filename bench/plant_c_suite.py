@@ -61,6 +61,13 @@ SAME["motor_back_emf"] = {"drive_voltage": lambda m: m}
 SAME["servo_handoff"] = {"servo_release": lambda m: m}
 # a round toe rolling in stance (`diagnosis.foot`, `laws.stance_forces`): its radius r_f [m], the mechanism's own magnitude
 SAME["round_foot"] = {"foot_radius": lambda m: m}
+# the boom's sphere (`diagnosis.sphere`): R [m], from the mechanism's magnitude, its pull at 2 m/s and z = 0.35 m,
+# (0.35 - z_p) 4/R^2 with its own pivot height z_p = 0.115 m
+SAME["boom_centripetal"] = {"boom_curvature": lambda m: ((0.35 - 0.115) * 4.0 / m) ** 0.5}
+# plant-C mechanism -> the parameter whose drift over the recording is its law (by mechanism) and the mechanism's
+# magnitude from the drift: the elevation coupling's mean slip per touchdown [m] is the fall of the ground's height
+# as the height reading gives it (`diagnosis.drift`) over the touchdowns between the first stride and the last
+DRIFTS = {"elevation_coupling_slip": ("ground_height", lambda drift, strides: -drift.change / max(strides - 1, 1))}
 # plant-C mechanism -> the forms of a dependence on the track position (`diagnosis.dependence`) that are its law
 # (by mechanism) and those that are its floor alone (look-alike)
 DEPENDENCES = {"floor_board": ({"board"}, set()), "tilted_pivot": ({"tilt"}, {"wave"})}
@@ -68,7 +75,7 @@ DEPENDENCES = {"floor_board": ({"board"}, set()), "tilted_pivot": ({"tilt"}, {"w
 
 def score(result, truth: dict) -> dict:
     """By mechanism, look-alike, missed, false verdicts; whether a clean recording was flagged."""
-    used, by_mechanism, alike, misses, dependences_used = set(), [], [], [], set()
+    used, by_mechanism, alike, misses, dependences_used, drifts_used = set(), [], [], [], set(), set()
     for effect in truth["effects"]:
         names, sites = NEAR.get(effect["id"], (set(), set()))
         same = SAME.get(effect["id"], {})
@@ -77,6 +84,12 @@ def score(result, truth: dict) -> dict:
         for forms, how in ((own, "mechanism"), (floor_alone, "alike")):
             dependence = None if found else dependence_found(result, effect, forms, dependences_used)
             found = (None, how, dependence[1]) if dependence else found
+        for k, drift in enumerate(result.drifts if effect["id"] in DRIFTS and not found else []):
+            parameter, magnitude = DRIFTS[effect["id"]]
+            got, want = magnitude(drift, len(result.data.strides)), float(effect["magnitude"])
+            if drift.parameter == parameter and abs(got - want) <= 0.25 * abs(want):
+                drifts_used.add(k)
+                found = (None, "mechanism", f"drift of {parameter}: {got:.4g} per stride (true {want:.4g})")
         for k, r in enumerate(result.chosen if found is None else []):
             for option in [r] + list(r.ties):
                 c = option.candidate
@@ -98,7 +111,7 @@ def score(result, truth: dict) -> dict:
         used.add(found[0])
         (by_mechanism if found[1] == "mechanism" else alike).append((effect["id"], found[2]))
     false = [r.name for k, r in enumerate(result.chosen) if k not in used]
-    false += [f"drift of {d.parameter}" for d in result.drifts]     # plant C has no drifting parameter
+    false += [f"drift of {d.parameter}" for k, d in enumerate(result.drifts) if k not in drifts_used]
     false += [f"dependence ({d.form})" for k, d in enumerate(result.dependences) if k not in dependences_used]
     flagged = bool(result.chosen or result.drifts or result.dependences) or result.verdict != "no significant mismatch"
     return {"by_mechanism": by_mechanism, "alike": alike, "misses": misses, "false_verdicts": false,

@@ -3,7 +3,7 @@ Bouc-Wen element, `laws.hysteresis_rate`) and the forward position read with an 
 (`simulate.periodic_y`, its period found by a frequency scan), the leg's swing in flight reacting on the body
 (`swing`), the drive's voltage limiting the hip motor's current against its back-EMF (`backemf`), the flight's
 position servo released late after touchdown (`servo`), a round toe rolling in stance (`foot`,
-`laws.stance_forces`). Real diagnoses of short recordings (28 strides) of plant C (test/plant_c/, written blind)
+`laws.stance_forces`), the body carried on the boom's sphere (`sphere`, `laws.boom_sphere`). Real diagnoses of short recordings (28 strides) of plant C (test/plant_c/, written blind)
 made with its own generator at sizes and seeds the suite does not use."""
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ SWING = (0.4, 0.08)                      # plant C's leg mass m_l [kg], its cent
 BACK_EMF = (8.0, 0.45)                   # plant C's drive voltage V [V], winding resistance R [ohm]
 SERVO = (12.0, 0.03)                     # plant C's flight servo K_p [N m/rad], released t_h [s] after touchdown
 FOOT = 0.02                              # plant C's round toe's radius r_f [m]
+SPHERE = 1.3                             # plant C's boom radius R [m] (its pivot at hardware.yaml's 0.115 m)
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +52,8 @@ def recordings(tmp_path_factory):
                                       ("swing", make("leg_swing_reaction", m_l={SWING[0]}, r_c={SWING[1]}), 4103),
                                       ("back_emf", make("motor_back_emf", V={BACK_EMF[0]}, R={BACK_EMF[1]}), 4104),
                                       ("servo", make("servo_handoff", K_p={SERVO[0]}, t_h={SERVO[1]}), 4106),
-                                      ("foot", make("round_foot", r_f={FOOT}), 4105)):
+                                      ("foot", make("round_foot", r_f={FOOT}), 4105),
+                                      ("sphere", make("boom_centripetal", R={SPHERE}), 4107)):
             meas, truth, _ = simulate(name, [mechanism.id], seed, strides={STRIDES}, mechanisms=[mechanism])
             write(Path(sys.argv[1]), name, meas, truth)
         """), str(folder)], check=True, capture_output=True, timeout=300, cwd=PLANT_C)
@@ -219,3 +221,16 @@ def test_a_round_toe_rolls_its_contact_point_forward_and_lands_at_a_height_even_
     errors = [Errors.of(search.data, {k: v[row] for k, v in sim["pred"].items()}).total for row in range(3)]
     assert errors[1] < model.errors.total / 10, (errors, model.errors)
     assert errors[1] < min(errors[0], errors[2]), errors
+
+
+def test_the_body_on_the_booms_sphere_is_named_by_its_radius(recordings):
+    """Plant C's boom of 1.3 m: its forward speed pulls the raised body down and pushes it along the track (the
+    sphere's centripetal and Coriolis terms, its height read along the arc). Named `boom_curvature` by its radius
+    within 25 %, the reading said, in words and --json."""
+    result = diagnose_file(recordings / "sphere.csv", json_path=recordings / "sphere_diagnosis.json")
+    named = {r.name: r for r in result.chosen}
+    assert "boom_curvature" in named, result.verdict
+    assert abs(named["boom_curvature"].magnitude - SPHERE) <= 0.25 * SPHERE, result.verdict
+    assert "the boom's sphere, radius R" in result.verdict and "read along the arc" in result.verdict, result.verdict
+    doc = json.loads((recordings / "sphere_diagnosis.json").read_text())
+    assert "boom_curvature" in json.dumps(doc["verdict"]), doc["verdict"]

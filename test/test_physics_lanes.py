@@ -44,6 +44,8 @@ def _variants() -> list[laws.Coefficients]:
     # a round toe rolling in stance (diagnosis.foot): its centre the toe's state, alone and beside a hip friction
     out += [base.replace(foot_radius=r) for r in (0.01, 0.03)]
     out.append(effects.apply(base.replace(foot_radius=0.02), {"hip_dry_friction": 0.05})[0])
+    # the boom's sphere in every phase (diagnosis.sphere), the height read as R sin(elevation) and along the arc
+    out += [base.replace(boom_curvature=0.6, boom_pivot_height=0.115, boom_sine_reading=s) for s in (1.0, 0.0)]
     return out
 
 

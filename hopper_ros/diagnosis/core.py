@@ -26,7 +26,7 @@ from .angle import find_angle_law
 from .candidates import candidate_sites
 from .data import PHASES, StrideData, own_ramps, prepare
 from .dependence import find_dependence, lap_length
-from .drift import find_drift
+from .drift import drift_data, find_drift, modelled
 from .locate import Location, fit_locations, locate
 from .lookalikes import discovered_look_alikes, fit_secondary
 from .progress import QUIET, Progress
@@ -67,7 +67,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     drifts = find_drift(data, state.current, settings)[:1]
     after = drifts[0].after if drifts else state.after     # the model with the drift
     floor = noise_floor(data, moves)
-    residual_location = state.residual_location
+    residual_location = _drifted_location(data, state, drifts)
     left = completeness(model.errors, after, floor, residual_location, settings)
     def unused_law():
         scaled, scaled_model = rescaled(search, base_sim["series"], moves)
@@ -86,7 +86,8 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
             chosen = found
             state = _accepted(search, chosen, log, model, base_sim["series"], moves)
             drifts = find_drift(data, state.current, settings)[:1]
-            after, residual_location = (drifts[0].after if drifts else state.after), state.residual_location
+            after, residual_location = (drifts[0].after if drifts else state.after), _drifted_location(data, state,
+                                                                                                        drifts)
             left = completeness(model.errors, after, floor, residual_location, settings)
     dependences = []
     if not left.explained:      # what the accepted effects leave may depend on where along the track a stride is
@@ -102,7 +103,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     return Diagnosis(data, log.rounds, chosen, model.errors, after, _rms_table(state.final_sim, 0, data),
                      _rms_table(state.final_sim, 1, data), base_sim["series"], state.final_sim["series"],
                      state.first_location, residual_location, log.discoveries,
-                     verdict(chosen, residual_location if chosen or dependences else state.first_location,
+                     verdict(chosen, residual_location if chosen or dependences or drifts else state.first_location,
                              settings.locate_threshold, left, drifts, dependences),
                      settings, dict(model_effects or {}), completeness=left, drifts=drifts, dependences=dependences)
 
@@ -147,6 +148,14 @@ def _accepted(search: Search, chosen: list[Scored], log: Log, model: Reference, 
     return Accepted(current, final_sim, after, first_location, residual_location)
 
 
+def _drifted_location(data: StrideData, state: Accepted, drifts: list) -> list:
+    """The residual the accepted effects leave, located with the drift modelled where there is one (on the strides
+    it was fitted on, `drift.drift_data`)."""
+    if not drifts:
+        return state.residual_location
+    return locate(drift_data(data, drifts[0].parameter), modelled(state.current, drifts))[0]
+
+
 def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drifts: list, lap: float):
     """(the accepted effects kept, the model with them, the drift and the dependence, the dependence): the floor's
     dependence on the track position beside the accepted effects, and without each effect that it makes
@@ -156,8 +165,7 @@ def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drif
     settings = search.settings
 
     def with_it(effects):
-        v = search.stack(effects).variant()
-        v = Variant(v.coefficients, v.sensors, {**v.per_stride, **{d.parameter: d.per_stride for d in drifts}})
+        v = modelled(search.stack(effects).variant(), drifts)
         found = find_dependence(own, v, settings, lap)
         return effects, v, found
 

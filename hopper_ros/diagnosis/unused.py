@@ -3,8 +3,9 @@ angle about its vertical axis (`azimuth`: the forward position read with an erro
 compression since its last reversal (`hysteresis`: a hysteretic leg force), the leg's angle in flight (`swing`:
 the body's recoil against the leg swung in flight), the leg's speed beside the command (`backemf`: the drive's
 voltage limiting the motor's current against its back-EMF), the time since touchdown beside the leg angle
-(`servo`: the flight's position servo released late) and the contact point's motion in stance (`foot`: a round
-toe rolling on the ground).
+(`servo`: the flight's position servo released late), the contact point's motion in stance (`foot`: a round
+toe rolling on the ground) and the height above the boom's pivot beside the forward speed (`sphere`: the body carried
+on the boom's sphere, not a plane).
 
 Where the accepted effects, the leg angle's laws (`angle`) and a drift leave the recording not explained, each law
 is fitted (the period by a frequency scan, the yield on a grid, the trajectories choosing) and put in a round with
@@ -33,6 +34,7 @@ from .foot import foot_candidate
 from .locate import locate
 from .records import Errors, Reference, Scored
 from .search import Search
+from .sphere import sphere_candidates
 from .simulate import CHANNELS, simulate_variants
 from .swing import swing_candidate
 from .yardstick import trajectory_sd
@@ -79,8 +81,8 @@ def refitted(search: Search, chosen: list[Scored], current: Reference) -> Refere
 
 def find_unused_law(search: Search, chosen: list[Scored], current: Reference, sets, located: set) -> Scored | None:
     """The boom angle's periodic reading error (where its scan stands on held-out strides), the leg's hysteresis,
-    the leg's swing in flight, the drive's voltage limit, the servo released late or a round toe rolling in stance,
-    where it wins a round beside the accepted effects against the library's (each judged against the accepted
+    the leg's swing in flight, the drive's voltage limit, the servo released late, a round toe rolling in stance or
+    the boom's sphere, where it wins a round beside the accepted effects against the library's (each judged against the accepted
     effects `refitted` on this search); None otherwise."""
     settings = search.settings
     stack = search.stack(chosen)
@@ -99,6 +101,7 @@ def find_unused_law(search: Search, chosen: list[Scored], current: Reference, se
                                                    for r in backemf.resistances(settings)], current))
     laws.append(servo.best_release(search, stack, current, settings))
     laws.append(foot_candidate())
+    laws.append(best_candidate(search, stack, sphere_candidates(), current))
     return win_round(search, chosen, current, laws, located, WHAT)
 
 

@@ -122,7 +122,8 @@ def _is_on(c, name):
 
 
 for _law in (laws.ramp_torque, laws.smooth_sign, laws.flight_y_term, laws.flight_z_term, laws.leg_term,
-             laws.hip_term, laws.jump_term, laws.sum_terms, laws.flight_acceleration, laws.stance_context,
+             laws.hip_term, laws.jump_term, laws.sum_terms, laws.boom_sphere, laws.flight_acceleration,
+             laws.stance_context,
              laws.leg_force, laws.hysteresis_rate, laws.hip_losses, laws.voltage_limited, laws.servo_hold,
              laws.rotor_torque,
              laws.stance_forces,

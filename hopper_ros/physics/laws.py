@@ -87,6 +87,9 @@ class Coefficients:
     flight_friction_z: object = 0.0         # [m/s^2] ... about its horizontal axis
     horizontal_mass_ratio: object = 0.0     # r: horizontal effective mass m_b (1 + r) (the boom's inertia)
     track_gravity: object = 0.0             # [m/s^2] gravity along the track (a tilted boom axis), every phase
+    boom_curvature: object = 0.0            # 1/R^2 [1/m^2]: the body carried on the boom's sphere of radius R ...
+    boom_pivot_height: object = 0.0         # z_p [m]  ... about a pivot at this height, every phase (`boom_sphere`),
+    boom_sine_reading: object = 1.0         #   its height read as R sin(elevation) (1) or along the arc (0)
     # touchdown
     touchdown_loss_along: object = 0.0      # share of the velocity along the leg lost at touchdown
     touchdown_loss_across: object = 0.0     # share of the velocity across the leg lost at touchdown
@@ -176,7 +179,8 @@ def active(c: Coefficients) -> frozenset:
 
 # the coefficients whose law is skipped where they are 0 (`is_on`); ground_friction is on where finite, and a
 # `*_terms` field where any of its coefficients is not 0
-GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "spring_cubic", "spring_preload",
+GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "boom_curvature", "spring_cubic",
+         "spring_preload",
          "quadratic_damping", "leg_friction", "leg_hysteresis", "hip_viscous", "hip_friction", "hip_ripple_sin",
          "hip_ripple_cos",
          "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness", "foot_radius")
@@ -206,11 +210,34 @@ def flight_acceleration(c: Coefficients, y, z, ydot, zdot):
         az = az - c.flight_friction_z * smooth_sign(zdot)
     if is_on(c, "track_gravity"):
         ay = ay + c.track_gravity
+    if is_on(c, "boom_curvature"):
+        sphere_y, sphere_z = boom_sphere(c, z, ydot, zdot)
+        ay, az = ay + sphere_y, az + sphere_z
     if is_on(c, "flight_y_terms") or is_on(c, "flight_z_terms"):
         context = FlightContext(y, z, ydot, zdot, c.flight_z_knot)
         ay = ay + sum_terms(flight_y_term, c.flight_y_terms, context) / c.mass
         az = az + sum_terms(flight_z_term, c.flight_z_terms, context) / c.mass
     return ay, az
+
+
+def boom_sphere(c: Coefficients, z, ydot, zdot):
+    """(y'', z'') the boom's sphere adds in every phase: the body moves on a sphere of radius R about the boom's
+    pivot, at z_p in the model's heights, where the model has a plane. With the elevation beta, the azimuth phi,
+    y' ~ R phi' and the sphere's equations R beta'' = -g cos beta - R phi'^2 sin beta cos beta + F_beta/m and
+    d/dt(cos^2 beta phi') = 0, to the first order beyond the plane (b = (z - z_p)/R):
+
+        y'' += 2 (z - z_p) z' y'/R^2                 (Coriolis: the angular momentum about the vertical axis)
+        z'' += -(z - z_p) y'^2/R^2 + g b^2/2         the height read along the arc, z - z_p = R beta
+        z'' += -(z - z_p) (y'^2 + z'^2)/R^2 + g b^2  the height read as R sin beta (hardware.encoders)
+
+    (the forward speed's centripetal acceleration along the elevation; gravity's share along it, g cos beta, and
+    for a height read as R sin beta its cos beta once more and the reading's own curve). `boom_curvature` is
+    1/R^2, `boom_sine_reading` 1 for the height read as R sin beta, 0 along the arc."""
+    height = z - c.boom_pivot_height
+    lever = c.boom_curvature * height
+    sine = c.boom_sine_reading
+    return 2.0 * lever * zdot * ydot, lever * (0.5 * (1.0 + sine) * c.gravity * height - sine * zdot * zdot
+                                               - ydot * ydot)
 
 
 # ---------------------------------------------------------------------------- stance
@@ -364,6 +391,9 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     if is_on(c, "track_gravity"):
         ydd = ydd + c.track_gravity
     zdd = (force * cos - across * sin) / c.mass - c.gravity
+    if is_on(c, "boom_curvature"):
+        sphere_y, sphere_z = boom_sphere(c, z, ydot, zdot)
+        ydd, zdd = ydd + sphere_y, zdd + sphere_z
     q_rate = 0.0
     if is_on(c, "leg_hysteresis"):
         q_rate = hysteresis_rate(c, hysteresis, -rho_dot)

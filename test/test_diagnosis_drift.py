@@ -1,0 +1,54 @@
+"""Drift over a recording (`diagnosis.drift`, issue 28 point 2) of the ground's height as the height reading gives
+it: plant C's elevation encoder whose coupling slips at each touchdown's shock (test/plant_c/, written blind), made
+with its own generator at a size and seed its suite does not use. The plant's stiffness drift is test_plant_b's."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from hopper_ros.diagnosis import diagnose_file
+
+pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
+
+PLANT_C = Path(__file__).resolve().parent / "plant_c"
+STRIDES = 44                       # a drift is judged on 4 strides a fold at least (10 folds)
+SLIPS = 3.0                        # plant C's mean counts the coupling slips per touchdown (0.21 mm each)
+
+
+@pytest.fixture(scope="module")
+def slipping(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("drift")
+    subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
+        import sys
+        from pathlib import Path
+        sys.path.insert(0, ".")
+        from effects import make
+        from suite import simulate, write
+        mechanism = make("elevation_coupling_slip", lam={SLIPS})
+        meas, truth, _ = simulate("slip", [mechanism.id], 4201, strides={STRIDES}, mechanisms=[mechanism])
+        write(Path(sys.argv[1]), "slip", meas, truth)
+        """), str(folder)], check=True, capture_output=True, timeout=300, cwd=PLANT_C)
+    return folder
+
+
+def test_a_height_reading_that_slips_at_each_touchdown_is_a_drift_of_the_ground(slipping):
+    """The height reading falls by Poisson(3) counts at each touchdown and is never re-homed: the model, started
+    from each measured apex, meets a floor that seems to fall through the recording. Said as the ground's height,
+    as the reading gives it, falling over the recording in mm and mm/s, its fall per touchdown within 25 % of the
+    plant's mean slip, modelled (held-out E_p + E_v + E_t at least halved); no library effect in its place."""
+    truth = json.loads((slipping / "slip.json").read_text())["effects"][0]
+    result = diagnose_file(slipping / "slip.csv")
+    assert [d.parameter for d in result.drifts] == ["ground_height"], result.verdict
+    drift = result.drifts[0]
+    per_touchdown = -drift.change / (len(result.data.strides) - 1)
+    assert abs(per_touchdown - truth["magnitude"]) <= 0.25 * truth["magnitude"], (per_touchdown, drift.sentence())
+    assert "as the height reading gives it" in result.verdict and "mm over the recording" in result.verdict
+    assert "mm/s" in result.verdict and "falls" in result.verdict, result.verdict
+    assert drift.after.total < 0.5 * drift.before.total, drift.sentence()
+    assert not result.chosen, result.verdict
