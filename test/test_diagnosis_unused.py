@@ -1,10 +1,11 @@
-"""Laws of what the model does not use (`diagnosis.unused`, issue 28 point 1): hysteresis in the leg force (a
-Bouc-Wen element, `laws.hysteresis_rate`) and the forward position read with an error periodic in the boom's angle
+"""Laws of what the model does not use (`diagnosis.unused`, issue 28 point 1): hysteresis in the leg force (a Bouc-Wen
+element, `laws.hysteresis_rate`) and the forward position read with an error periodic in the boom's angle
 (`simulate.periodic_y`, its period found by a frequency scan), the leg's swing in flight reacting on the body
 (`swing`), the drive's voltage limiting the hip motor's current against its back-EMF (`backemf`), the flight's
 position servo released late after touchdown (`servo`), a round toe rolling in stance (`foot`,
-`laws.stance_forces`), the body carried on the boom's sphere (`sphere`, `laws.boom_sphere`). Real diagnoses of short recordings (28 strides) of plant C (test/plant_c/, written blind)
-made with its own generator at sizes and seeds the suite does not use."""
+`laws.stance_forces`), the body carried on the boom's sphere (`sphere`, `laws.boom_sphere`). Real diagnoses of short
+recordings (28 strides) of plant C (test/plant_c/, written blind) made with its own generator at sizes and seeds the
+suite does not use."""
 
 from __future__ import annotations
 

@@ -286,6 +286,10 @@ def test_supervisor_escalates_and_leaves_no_grandchild():
         pids = {l.split()[2].rstrip(":"): int(l.split()[-1]) for l in lines if l.startswith("[launch] started")}
         grandchild = int(next(l for l in lines if l.startswith("[stubborn] grandchild")).split()[-1])
         assert process_alive(grandchild)
+        # each node a session of its own, its children in it: the kernel's autogroups weigh every node as one job
+        # against a busy session beside the graph, not the graph as one (supervisor._start)
+        assert all(os.getsid(pid) == pid for pid in pids.values()), {pid: os.getsid(pid) for pid in pids.values()}
+        assert os.getsid(grandchild) == pids["stubborn"]
         process.send_signal(signal.SIGINT)
         out, err = process.communicate(timeout=SAFETY_TIMEOUT)
         lines += out.splitlines()

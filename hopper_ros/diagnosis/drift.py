@@ -4,7 +4,7 @@ heats, a joint that wears, a bolt that loosens) while the model holds it constan
 After the accepted effects each main parameter p (k, d, g, rho_0) is given a linear trend over the recording,
 p_i = p (1 + a + b s_i), s_i the stride's time from the recording's middle over its length, and the ground's height
 under the toe one in its own unit, h_i = h + a + b s_i (the floor as the height reading gives it: where the reading's
-zero drifts, an encoder's coupling slipping at the touchdowns' shocks or a boom that sags, the ground seems to move
+zero drifts, an encoder's coupling slipping at the touchdowns' shocks, the ground seems to move
 by as much the other way, the flight's law being the same at any height; its ramps read from each stride's own
 start of stance, `data.own_ramps`, as a floor at another height per stride has them), fitted and judged on
 held-out strides by `perstride` against the same parameter held constant. A trend stands when its one-sided t
@@ -29,9 +29,9 @@ from .simulate import Variant
 PARAMETERS = (Parameter("stiffness", "the leg stiffness k", 0.01), Parameter("damping", "the leg damping d", 0.05),
               Parameter("gravity", "the effective gravity g", 0.005),
               Parameter("rest_length", "the leg's rest length rho_0", 0.005),
-              Parameter("ground_height", "the ground's height under the toe, as the height reading gives it (its zero "
-                                         "drifting: a slipping encoder coupling, a sagging boom; or the floor itself)",
-                        0.0005, relative=False))
+              Parameter("ground_height", "the ground's height under the toe, as the height reading gives it (the "
+                                         "reading's zero drifting, an encoder's coupling that slips; or the floor "
+                                         "itself)", 0.0005, relative=False))
 
 
 @dataclass
@@ -71,7 +71,8 @@ def modelled(variant: Variant, drifts: list) -> Variant:
     """`variant` with the first drift's values per stride."""
     if not drifts:
         return variant
-    return Variant(variant.coefficients, variant.sensors, {**variant.per_stride, drifts[0].parameter: drifts[0].per_stride})
+    drift = drifts[0]
+    return Variant(variant.coefficients, variant.sensors, {**variant.per_stride, drift.parameter: drift.per_stride})
 
 
 def find_drift(recording: StrideData, variant: Variant, settings) -> list[Drift]:

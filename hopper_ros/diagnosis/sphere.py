@@ -8,12 +8,12 @@ it on a plane (`laws.boom_sphere`), in flight and in stance:
 b = (z - z_p)/R, z_p the pivot's height in the model's heights (hardware.yaml: the boom's parallel height less the
 running surface's, as `hardware.encoders` converts the elevation, as R sin beta). The forward speed's centripetal
 acceleration pulls a body raised above the pivot down, more the faster it runs (0.35 m/s^2 at 2 m/s, 0.235 m above
-the pivot of a 1.65 m boom); what the corrected g (4.5)-(4.7) holds is the mean of the terms in the height alone.
-A recording does not say how its heights were read from the elevation: both readings are fitted and the
-trajectories choose (`angle.best_candidate`; a plant whose height is the arc's, plant C's, and MuJoCo's hinges read
-as R sin beta each pick their own). One magnitude, 1/R^2, searched from 0 to the curvature of a sphere of half the
-boom's length (`REACH`), said as R beside hardware.yaml's boom length; offered where the accepted effects leave the
-recording not explained (`unused`), in a round with the library's effects.
+the pivot of a 1.65 m boom); what the corrected g (4.5)-(4.7) holds is the mean of the terms in the height alone. A
+recording does not say how its heights were read from the elevation: both readings are fitted and the trajectories
+choose (`angle.best_candidate`; measured at R = 1.65 m: plant C, whose height is the arc's, fits the arc better,
+MuJoCo's hinges read as R sin beta the sine). One magnitude, 1/R^2, searched from 0 to the curvature of a sphere of
+half the boom's length (`REACH`), said as R beside hardware.yaml's boom length; offered where the accepted effects
+leave the recording not explained (`unused`), in a round with the library's effects.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from .candidates import Candidate
 
 NAME = "boom_curvature"     # the candidate's name and the coefficient of 1/R^2 [1/m^2] (`laws.Coefficients`)
 REACH = 2.0                 # the shortest radius searched is the boom's length over REACH
+SAID_AT = (2.0, 0.35)       # (forward speed [m/s], height [m]) at which the words give the pull's size
 SITE = "flight_vertical"    # where it acts alone (in stance beside the leg's far larger forces): its pull
 
 
@@ -49,12 +50,13 @@ class Sphere:
         self.pivot_height, self.boom_length, self.sine = pivot_height, boom_length, sine
 
     def words(self, curvature: float) -> str:
-        pull = curvature * 4.0 * (0.35 - self.pivot_height)
+        speed, height = SAID_AT
+        pull = curvature * speed ** 2 * (height - self.pivot_height)
         return (f"in every phase, the body moves on the boom's sphere, radius R = {radius(curvature):.3g} m about the "
-                f"pivot {1e3 * self.pivot_height:.0f} mm above the ground (hardware.yaml's boom: {self.boom_length:.3g} "
-                f"m), not on the model's plane: the forward speed pulls the raised body down by (z - z_p) y'^2/R^2 "
-                f"({pull:.2g} m/s^2 at 2 m/s and z = 0.35 m), with a Coriolis push 2 (z - z_p) z' y'/R^2 along the "
-                f"track ({READINGS[self.sine]})")
+                f"pivot {1e3 * self.pivot_height:.0f} mm above the ground (hardware.yaml's boom: "
+                f"{self.boom_length:.3g} m), not on the model's plane: the forward speed pulls the raised body down "
+                f"by (z - z_p) y'^2/R^2 ({pull:.2g} m/s^2 at {speed:g} m/s and z = {height:g} m), with a Coriolis push "
+                f"2 (z - z_p) z' y'/R^2 along the track ({READINGS[self.sine]})")
 
     def terms(self) -> list:
         return [("1/R^2", 1.0, "the curvature of the sphere the boom's tip moves on", "1/m^2")]
