@@ -1,16 +1,16 @@
 """Drift over a recording (issue 28, point 2): a main parameter of the model that changes with time (a spring that
 heats, a joint that wears, a bolt that loosens) while the model holds it constant.
 
-After the accepted effects each main parameter p (k, d, g, rho_0) is given a linear trend over the recording,
-p_i = p (1 + a + b s_i), s_i the stride's time from the recording's middle over its length, and the ground's height
-under the toe one in its own unit, h_i = h + a + b s_i (the floor as the height reading gives it: where the reading's
-zero drifts, an encoder's coupling slipping at the touchdowns' shocks, the ground seems to move
-by as much the other way, the flight's law being the same at any height; its ramps read from each stride's own
-start of stance, `data.own_ramps`, as a floor at another height per stride has them), fitted and judged on
-held-out strides by `perstride` against the same parameter held constant. A trend stands when its one-sided t
-over strides is at least `min_t` and it lowers the held-out E_p + E_v + E_t by `drift_share` (a trend that removes
-less leaves a larger mismatch it may stand in for); it is then said with its size and rate and modelled (the
-variant's `per_stride` values).
+After the accepted effects each main parameter p (k, d, g, rho_0) is given a linear trend over the recording, p_i =
+p (1 + a + b s_i), s_i the stride's time from the recording's middle over its length, and the ground's height under
+the toe one in its own unit, h_i = h + a + b s_i (the floor as the height reading gives it: where the reading's zero
+drifts, an encoder's coupling slipping at the touchdowns' shocks, the ground seems to move by as much the other way,
+the flight's law being the same at any height; its ramps read from each stride's own start of stance,
+`data.own_ramps`, as a floor at another height per stride has them), fitted and judged on held-out strides by
+`perstride` against the same parameter held constant. A trend stands when its one-sided t over strides is at least
+`min_t` and it lowers the held-out E_p + E_v + E_t by `drift_share` (a trend that removes less leaves a larger
+mismatch it may stand in for); it is then said with its size and rate and modelled (the variant's `per_stride`
+values).
 """
 
 from __future__ import annotations

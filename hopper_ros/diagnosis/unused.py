@@ -34,8 +34,8 @@ from .foot import foot_candidate
 from .locate import locate
 from .records import Errors, Reference, Scored
 from .search import Search
-from .sphere import sphere_candidates
 from .simulate import CHANNELS, simulate_variants
+from .sphere import sphere_candidates
 from .swing import swing_candidate
 from .yardstick import trajectory_sd
 
