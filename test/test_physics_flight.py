@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from hopper_ros.physics import laws
 from hopper_ros.physics.flight import apex_time, descent_time, flight_state
 
 G = 11.42
@@ -62,7 +63,6 @@ def test_the_boom_sphere_law_is_a_body_on_a_sphere_to_the_first_order(elevation,
     phi'' = 2 tan beta beta' phi', y = R phi, the height z = z_p + R sin beta (hardware.encoders' reading, `sine`
     1) or z = z_p + R beta (read along the arc, 0). The plane's (2.8) misses them by the first order in beta; with
     the law what is left is a tenth of that or less."""
-    from hopper_ros.physics import laws
     radius, pivot = 1.65, 0.115
     height_rate = math.cos(elevation) if sine else 1.0          # dz/d(beta) / R
     beta_rate, phi_rate = vertical / (radius * height_rate), forward / radius

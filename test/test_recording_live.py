@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 
+from conftest import SAFETY_TIMEOUT
 from hopper_ros.recording.bag import BagReader, bag_info
 
 
@@ -97,12 +98,12 @@ def test_sigkill_loses_at_most_the_last_chunk(rclpy_session, hopper_cli, tmp_pat
         recorder.wait_for_line(r"subscribed to /body_measurement")
         # the subscription created is not yet matched: on a loaded machine (CI) discovery took long enough that only
         # the last 28 of the messages counted from the line reached the recorder; count from the match
-        deadline = time.monotonic() + 20.0
+        deadline = time.monotonic() + SAFETY_TIMEOUT
         while not publisher.get_subscription_count() and time.monotonic() < deadline:
             time.sleep(0.01)
         assert publisher.get_subscription_count(), "the recorder's subscription never matched the publisher"
         # two seconds' worth of messages after the match (a loaded machine publishes late: count, not time)
-        start, deadline = published[0], time.monotonic() + 20.0
+        start, deadline = published[0], time.monotonic() + SAFETY_TIMEOUT
         while published[0] - start < 2 * rate and time.monotonic() < deadline:
             time.sleep(0.05)
         at_kill = published[0]

@@ -26,7 +26,7 @@ from .angle import find_angle_law
 from .candidates import candidate_sites
 from .data import PHASES, StrideData, own_ramps, prepare
 from .dependence import find_dependence, lap_length
-from .drift import drift_data, find_drift, modelled
+from .drift import drift_data, find_drift, with_drift
 from .locate import Location, fit_locations, locate
 from .lookalikes import discovered_look_alikes, fit_secondary
 from .progress import QUIET, Progress
@@ -153,7 +153,7 @@ def _drifted_location(data: StrideData, state: Accepted, drifts: list) -> list:
     it was fitted on, `drift.drift_data`)."""
     if not drifts:
         return state.residual_location
-    return locate(drift_data(data, drifts[0].parameter), modelled(state.current, drifts))[0]
+    return locate(drift_data(data, drifts[0].parameter), with_drift(state.current, drifts))[0]
 
 
 def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drifts: list, lap: float):
@@ -165,7 +165,7 @@ def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drif
     settings = search.settings
 
     def with_it(effects):
-        v = modelled(search.stack(effects).variant(), drifts)
+        v = with_drift(search.stack(effects).variant(), drifts)
         found = find_dependence(own, v, settings, lap)
         return effects, v, found
 

@@ -31,7 +31,7 @@ PARAMETERS = (Parameter("stiffness", "the leg stiffness k", 0.01), Parameter("da
               Parameter("rest_length", "the leg's rest length rho_0", 0.005),
               Parameter("ground_height", "the ground's height under the toe, as the height reading gives it (the "
                                          "reading's zero drifting, an encoder's coupling that slips; or the floor "
-                                         "itself)", 0.0005, relative=False))
+                                         "itself)", 0.0005, relative=False, moves_stance=True))
 
 
 @dataclass
@@ -62,12 +62,14 @@ class Drift:
 
 
 def drift_data(recording: StrideData, parameter: str) -> StrideData:
-    """The strides a drift of `parameter` is fitted and judged on: for the ground's height with the ramps read from
-    each stride's own start of stance (`data.own_ramps`), the recording's otherwise."""
-    return own_ramps(recording) if parameter == "ground_height" else recording
+    """The strides a drift of `parameter` (a name of PARAMETERS) is fitted and judged on: with the ramps read from
+    each stride's own start of stance (`data.own_ramps`) where it moves the stance's start, the recording's
+    otherwise."""
+    moves = next(p.moves_stance for p in PARAMETERS if p.name == parameter)
+    return own_ramps(recording) if moves else recording
 
 
-def modelled(variant: Variant, drifts: list) -> Variant:
+def with_drift(variant: Variant, drifts: list) -> Variant:
     """`variant` with the first drift's values per stride."""
     if not drifts:
         return variant

@@ -24,12 +24,15 @@ OUTPUTS = ("height", "length", "speed", "time")
 @dataclass(frozen=True)
 class Parameter:
     """A scalar coefficient of `laws.Coefficients`, its words, and the step of its sensitivity's re-simulation:
-    a share of its value (`relative`, the per-stride change is then a share too) or in its own unit."""
+    a share of its value (`relative`, the per-stride change is then a share too) or in its own unit. `moves_stance`:
+    a change of it moves each stance's start (the ground's height), so it is judged on the strides with their ramps
+    read from their own start of stance (`data.own_ramps`)."""
 
     name: str
     words: str
     step: float
     relative: bool = True
+    moves_stance: bool = False
 
     def values(self, value: float, change):
         return value * (1.0 + change) if self.relative else value + change

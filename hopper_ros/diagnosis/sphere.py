@@ -64,11 +64,11 @@ class Sphere:
 
 def sphere_candidates() -> list[Candidate]:
     """The law with the height read as R sin beta and along the arc."""
-    return [sphere_candidate(sine) for sine in READINGS]
-
-
-def sphere_candidate(sine: float) -> Candidate:
     pivot_height, boom_length = pivot_and_length()
+    return [sphere_candidate(sine, pivot_height, boom_length) for sine in READINGS]
+
+
+def sphere_candidate(sine: float, pivot_height: float, boom_length: float) -> Candidate:
     found = Sphere(pivot_height, boom_length, sine)
 
     def build(variant, value: float):
