@@ -43,6 +43,7 @@ import threading
 import time
 import uuid
 from collections import deque
+from itertools import islice
 from dataclasses import dataclass, field
 
 import can
@@ -118,6 +119,15 @@ class _FrameLog:
     @property
     def head(self) -> int:
         return self.first + len(self.entries)
+
+    def since(self, cursor: int) -> tuple[int, list]:
+        """(sequence number of the first entry returned, the entries from `cursor` on, or from the oldest kept);
+        a copy of the new entries only (a copy of the whole log every turn of the socket thread cost the simulated
+        robot's process CPU that its real-time loop needs: issue 29)."""
+        with self.lock:
+            start = max(cursor, self.first)
+            count = self.first + len(self.entries) - start
+            return start, list(islice(reversed(self.entries), max(count, 0)))[::-1]
 
     def append(self, origin, data: bytes) -> None:
         with self.lock:
@@ -377,8 +387,8 @@ class SocketcandServer:
     def _flush(self, selector) -> None:
         """One turn: every client's new frames into its buffer, then what its socket takes."""
         now = time.monotonic()
-        with self._log.lock:
-            first, entries = self._log.first, list(self._log.entries)
+        cursors = [c.cursor for c in self._clients if not c.dead and c.state == "raw"]
+        first, entries = self._log.since(min(cursors, default=self._log.head))
         head = first + len(entries)
         for client in self._clients:
             if client.dead:
