@@ -127,7 +127,7 @@ class ComposedChain:
     """encoder_bridge, state_estimator and event_detector composed as the container composes them,
     in a context (DDS participant) of their own, spun in a thread; a listener in the test's context."""
 
-    def __init__(self, rclpy_session, tmp_path, remapped: bool):
+    def __init__(self, rclpy_session, tmp_path, remapped: bool, listen: bool = True):
         from rclpy.experimental import EventsExecutor
         from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -165,7 +165,8 @@ class ComposedChain:
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000, reliability=ReliabilityPolicy.RELIABLE)
         self.got = {"measurements": [], "states": [], "events": []}
         for key, kind, topic in (("measurements", BodyMeasurement, self.measurements),
-                                 ("states", BodyState, "/c/body_state"), ("events", GaitEvent, "/c/gait_event")):
+                                 ("states", BodyState, "/c/body_state"), ("events", GaitEvent, "/c/gait_event"))[
+                                    :3 if listen else 0]:
             self.listener.create_subscription(kind, topic, lambda msg, key=key: self.got[key].append(msg), qos)
 
     def _spin(self) -> None:
@@ -249,6 +250,34 @@ def test_composed_chain_delivers_each_message_once_and_outside_subscribers_see_a
     # the chain's output: packet -> gait_event, apexes and touchdowns of the experiments
     from hopper_ros.msg import GaitEvent
     assert {GaitEvent.APEX, GaitEvent.TOUCHDOWN, GaitEvent.LIFTOFF} <= {e.type for e in got["events"]}
+
+
+def test_with_nobody_outside_listening_the_in_process_messages_stay_off_dds(rclpy_session, tmp_path, monkeypatch):
+    """As rclcpp's intra-process publishing: a message goes to DDS only where a subscription outside the
+    container's in-process ones is matched (issue 29: the 1 kHz states handed to DDS for nobody took the real-time
+    container a tenth of a core). The chain still runs in-process."""
+    from rclpy.publisher import Publisher
+
+    handed = {}
+    dds_publish = Publisher.publish
+
+    def counting(self, msg):
+        handed[self.topic_name] = handed.get(self.topic_name, 0) + 1
+        return dds_publish(self, msg)
+
+    monkeypatch.setattr(Publisher, "publish", counting)     # the real publish, counted per topic
+    datagrams = experiment_datagrams(1.0)
+    chain = ComposedChain(rclpy_session, tmp_path, remapped=False, listen=False)
+    try:
+        spin_until(chain.listener_executor, lambda: False, timeout=1.0)    # discovery settles
+        chain.send(datagrams)
+        n = len(datagrams)
+        assert spin_until(chain.listener_executor, lambda: chain.detector.counters["samples"] >= n)
+        estimator = dict(chain.estimator.counters)
+    finally:
+        chain.close()
+    assert estimator["measurements"] == n and estimator["predicted_samples"] == 0
+    assert handed.get("/c/body_measurement", 0) == 0 and handed.get("/c/body_state", 0) == 0, handed
 
 
 def test_a_composed_subscriber_still_hears_publishers_of_other_processes(rclpy_session, tmp_path):

@@ -3,7 +3,11 @@
 `composable(NodeClass, bus, intra_process)` makes a subclass whose `create_publisher` /
 `create_subscription` also register with the container's `IntraProcessBus`; the node's own code
 does not know it is composed. What the bus keeps of rclcpp's intra-process semantics:
-- every publish still goes to DDS: other processes (recorder, `hopper topic echo`) see it all;
+- a publish goes to DDS where a subscription other than this container's in-process ones is matched (another
+  process: a recorder, `hopper topic echo`), or its durability is transient-local (late joiners get its
+  history), as rclcpp's intra-process manager does (`Publisher::publish`: inter-process only with
+  inter-process subscriptions). Handing every 1 kHz state to DDS with nobody listening cost the demo's
+  real-time container a tenth of a core (issue 29);
 - a subscription of a node with intra-process on (extra_arg use_intra_process_comms) gets this
   container's messages in-process: a copy (publishers reuse their message objects) is queued and
   the callback runs on the subscriber's executor, never in the publishing thread; same full topic
@@ -137,12 +141,16 @@ class IntraProcessBus:
         """Wrap `publisher.publish`: every in-process subscription of its topic, then DDS as before."""
         topic, msg_type, dds_publish = publisher.topic_name, publisher.msg_type, publisher.publish
         best_effort = publisher.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+        keeps_history = publisher.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        matched = publisher.get_subscription_count
 
         def publish(msg) -> None:
-            for entry in self._topics.get(topic, ()):   # first, as rclcpp: the subscriber may run meanwhile
+            entries = self._topics.get(topic, ())
+            for entry in entries:   # first, as rclcpp: the subscriber may run meanwhile
                 if entry.subscription.msg_type is msg_type and not (entry.reliable and best_effort):
                     entry.offer(deserialize_message(msg, msg_type) if isinstance(msg, bytes) else msg)
-            dds_publish(msg)
+            if keeps_history or matched() > len(entries):
+                dds_publish(msg)
 
         publisher.publish = publish
         return publisher
