@@ -3,8 +3,11 @@
 Processes on this machine reach an in-process python-can bus through it with python-can's own
 client, `can.Bus(interface="socketcand", host="127.0.0.1", port=PORT, channel="can0")`; the
 in-process side (the emulated EPOS2 of the simulated robot) uses `server.local_bus()`, a
-python-can `virtual` bus on the hub's channel. Every frame of one client goes to every other
-client and to the in-process bus; every frame sent in-process goes to every client.
+python-can bus of the hub's own (`LocalBus`). Every frame of one client goes to every other
+client and to every local bus; every frame sent on a local bus goes to every client and every
+other local bus. A local bus hands frames over directly, without a thread of its own or python-can's
+`virtual` bus (a deep copy per frame and receiver, a queue, a thread waking per frame: about a tenth
+of the simulated robot's real-time CPU at 1 kHz, issue 29).
 
 The protocol (socketcand_protocol.py), as python-can 4.6.1's client speaks it: a handshake
 (`< hi >`, `< open CHANNEL >`, `< rawmode >`, each answered `< ok >`), then frames both ways. The
@@ -18,7 +21,7 @@ of at most `MAX_OUTPUT_BYTES`. Each turn of the socket thread moves every client
 into its buffer and sends what the kernel takes; a client whose socket is full is left until
 the selector says it is writable again. A client that falls a whole log behind (it stopped
 reading, or reads slower than the bus) is closed and counted (`slow_clients_dropped`); the other
-clients never wait for it. The in-process side never waits either: the bus thread only appends
+clients never wait for it. The in-process side never waits either: a local bus's send only appends
 to the log, and its wake-up of the socket thread is a non-blocking write that is skipped while
 one is pending. A turn of the socket thread is bounded by the number of clients, so the more
 clients there are, the more frames each `send` carries.
@@ -27,12 +30,13 @@ Robustness otherwise: the hub binds 127.0.0.1 (or another IPv4 loopback address)
 refuses any other host; a command it cannot parse is counted (`garbage_commands`) and dropped;
 a client that sends an endless unterminated command, does not finish the handshake within
 `HANDSHAKE_TIMEOUT` or would exceed `MAX_CLIENTS` is closed (counted); a disconnect is just a
-disconnect. It runs in two daemon threads; `close()` stops them within about 0.1 s and releases
+disconnect. It runs in a daemon thread; `close()` stops it within about 0.1 s and releases
 everything.
 """
 
 from __future__ import annotations
 
+import copy
 import errno
 import logging
 import re
@@ -41,7 +45,6 @@ import socket
 import struct
 import threading
 import time
-import uuid
 from collections import deque
 from itertools import islice
 from dataclasses import dataclass, field
@@ -71,7 +74,6 @@ MAX_CLIENTS = 512
 MAX_REPLY_BYTES = 4096
 _RECV_SIZE = 4096
 _SELECT_TIMEOUT = 0.01      # [s] socket thread wake-up (flushes queues after the grace time)
-_BUS_TIMEOUT = 0.05         # [s] bus thread receive timeout (bounds close() latency)
 _ACCEPTS_PER_TURN = 64      # connections accepted per socket-thread turn at most
 _READS_PER_TURN = 16        # reads per client per turn at most (one client cannot starve the rest)
 
@@ -140,17 +142,12 @@ class _FrameLog:
 class SocketcandServer:
     """The hub. `start()` it, give in-process users `local_bus()`, `close()` it at the end."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 0, channel: str = "can0", *,
-                 bus: can.BusABC | None = None, virtual_channel: str | None = None):
-        """`port` 0 picks a free one (see `.port`). Without `bus` the hub makes its own virtual
-        bus on `virtual_channel` (default: a unique name); with `bus`, `virtual_channel` names
-        that bus's virtual channel if `local_bus()` is to be used."""
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, channel: str = "can0"):
+        """`port` 0 picks a free one (see `.port`)."""
         self.host = loopback_host(host)
         self.channel = str(channel)
-        self.virtual_channel = virtual_channel or f"socketcand-hub-{uuid.uuid4().hex[:12]}"
-        self._own_bus = bus is None
-        self._bus = bus if bus is not None else can.Bus(interface="virtual", channel=self.virtual_channel)
-        self._local_buses: list[can.BusABC] = []
+        self._local_buses: tuple[LocalBus, ...] = ()     # copy on write: senders read it without a lock
+        self._local_lock = threading.Lock()
         self.counters = HubCounters()
         self._log = _FrameLog(MAX_QUEUED_FRAMES)
         self._clients: list[_Client] = []        # the socket thread's; others read a snapshot
@@ -165,8 +162,6 @@ class SocketcandServer:
             self._listener.setblocking(False)
         except OSError:
             self._listener.close()
-            if self._own_bus:
-                self._bus.shutdown()
             raise
         self.port = self._listener.getsockname()[1]
         self._wake_r, self._wake_w = socket.socketpair()
@@ -187,21 +182,33 @@ class SocketcandServer:
     def start(self) -> "SocketcandServer":
         if self._threads:
             return self
-        self._threads = [threading.Thread(target=self._serve_sockets, name="socketcand-sockets", daemon=True),
-                         threading.Thread(target=self._serve_bus, name="socketcand-bus", daemon=True)]
+        self._threads = [threading.Thread(target=self._serve_sockets, name="socketcand-sockets", daemon=True)]
         for thread in self._threads:
             thread.start()
         log.info("socketcand hub on %s:%d, channel %s", self.host, self.port, self.channel)
         return self
 
-    def local_bus(self) -> can.BusABC:
+    def local_bus(self) -> "LocalBus":
         """A new python-can bus on the hub's in-process side (shut down by `close()`)."""
-        bus = can.Bus(interface="virtual", channel=self.virtual_channel)
-        self._local_buses.append(bus)
+        bus = LocalBus(self)
+        with self._local_lock:
+            self._local_buses = self._local_buses + (bus,)
         return bus
 
+    def _from_local(self, msg: can.Message, origin: "LocalBus") -> None:
+        """A frame sent on a local bus: to the other local buses, and to the clients on the socket thread's next
+        turn (woken now)."""
+        others = [bus for bus in self._local_buses if bus is not origin]
+        if others:                                # a copy of the sender's frame, received now
+            frame = copy.copy(msg)
+            frame.timestamp, frame.channel, frame.is_rx = time.time(), self.channel, True
+            for bus in others:
+                bus.deliver(frame)
+        self._publish(msg, origin=None)
+        self._wake()
+
     def close(self) -> None:
-        """Stop both threads (each wakes at least every 50 ms) and close every socket."""
+        """Stop the socket thread (it wakes at least every 50 ms) and close every socket and local bus."""
         if self._closed:
             return
         self._closed = True
@@ -217,8 +224,6 @@ class SocketcandServer:
         self._wake_w.close()
         for bus in self._local_buses:
             bus.shutdown()
-        if self._own_bus:
-            self._bus.shutdown()
 
     def __enter__(self) -> "SocketcandServer":
         return self.start()
@@ -374,11 +379,9 @@ class SocketcandServer:
                 log.debug("socketcand hub: dropped %r: %s", " ".join(tokens), exc)
                 return
             self.counters.frames_from_clients += 1
-            msg.channel = self.channel
-            try:
-                self._bus.send(msg)
-            except can.CanError as exc:
-                log.warning("socketcand hub: in-process send failed: %s", exc)
+            msg.channel, msg.is_rx = self.channel, True
+            for bus in self._local_buses:         # one frame object for all: a receiver does not change it
+                bus.deliver(msg)
             self._publish(msg, origin=client)
         else:
             self.counters.garbage_commands += 1
@@ -458,22 +461,6 @@ class SocketcandServer:
 
     # ------------------------------------------------------------------ frames to clients
 
-    def _serve_bus(self) -> None:
-        while not self._stop.is_set():
-            try:
-                msg = self._bus.recv(timeout=_BUS_TIMEOUT)
-                if msg is None:
-                    continue
-                while msg is not None:                       # everything queued, one wake-up
-                    self._publish(msg, origin=None)
-                    msg = self._bus.recv(timeout=0.0)
-            except Exception as exc:                         # the bus went away: stop quietly
-                if not self._stop.is_set():
-                    log.warning("socketcand hub: bus receive failed: %s", exc)
-                    time.sleep(_BUS_TIMEOUT)
-                continue
-            self._wake()
-
     def _publish(self, msg: can.Message, origin: _Client | None) -> None:
         """Append a frame to the log (the socket thread sends it on its next turn)."""
         text = format_frame(msg)
@@ -494,3 +481,43 @@ class SocketcandServer:
         except OSError:
             pass
         sock.close()
+
+
+class LocalBus(can.BusABC):
+    """The hub's in-process side as a python-can bus: `recv` takes the frames of the clients and of the other
+    local buses (queued by their senders, bounded like the clients' log: the oldest go), `send` hands a frame to
+    them at once. No thread of its own."""
+
+    def __init__(self, hub: SocketcandServer):
+        self._hub = hub
+        self._inbox: deque = deque(maxlen=MAX_QUEUED_FRAMES)
+        self._arrived = threading.Condition()
+        self._closed = False
+        self.channel_info = f"socketcand hub {hub.host}:{hub.port} {hub.channel} (in-process)"
+        super().__init__(channel=hub.channel)
+
+    def deliver(self, msg: can.Message) -> None:
+        """Queue a frame for this bus's receiver (any thread)."""
+        self._inbox.append(msg)
+        with self._arrived:
+            self._arrived.notify()
+
+    def _recv_internal(self, timeout: float | None):
+        if not self._inbox and timeout != 0 and not self._closed:
+            with self._arrived:
+                self._arrived.wait_for(lambda: self._inbox or self._closed, timeout)
+        try:
+            return self._inbox.popleft(), False
+        except IndexError:
+            return None, False
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if self._closed:
+            raise can.CanOperationError("the hub's local bus is shut down")
+        self._hub._from_local(msg, self)
+
+    def shutdown(self) -> None:
+        self._closed = True
+        with self._arrived:
+            self._arrived.notify_all()
+        super().shutdown()
