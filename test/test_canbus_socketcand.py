@@ -21,7 +21,7 @@ import pytest
 from hopper_ros.canbus import epos2_objects as eo
 from hopper_ros.canbus.epos2_objects import State
 from hopper_ros.canbus.socketcand_protocol import format_frame, loopback_host, parse_send
-from hopper_ros.canbus.socketcand_server import SocketcandServer
+from hopper_ros.canbus.socketcand_server import MAX_QUEUED_FRAMES, SocketcandServer
 from test_canbus_epos2 import EDS, HARDWARE, NODE, DriveLoop
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -123,6 +123,21 @@ def test_frames_between_clients_and_the_local_bus(hub):
         a.shutdown()
         b.shutdown()
     assert wait(lambda: hub.client_count == 0)
+
+
+def test_a_local_bus_that_is_not_read_keeps_the_newest_frames_and_counts_the_rest(hub):
+    """Local buses hand frames to each other directly (no thread): one whose receiver stops reading keeps the last
+    MAX_QUEUED_FRAMES, drops the oldest and counts them; the sender never hears its own frames."""
+    sender, idle = hub.local_bus(), hub.local_bus()
+    extra = 10
+    for index in range(MAX_QUEUED_FRAMES + extra):
+        sender.send(can.Message(arbitration_id=0x181, data=index.to_bytes(2, "little"), is_extended_id=False))
+    assert sender.recv(timeout=0) is None
+    first = idle.recv(timeout=0)
+    assert int.from_bytes(first.data, "little") == extra and first.is_rx and first.channel == hub.channel
+    assert hub.counters.local_frames_dropped == extra
+    assert sum(1 for _ in iter(lambda: idle.recv(timeout=0), None)) == MAX_QUEUED_FRAMES - 1
+    assert idle.recv(timeout=0.05) is None                    # empty: waits its timeout, then nothing
 
 
 def test_wrong_channel_is_refused(hub):

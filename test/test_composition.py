@@ -125,7 +125,8 @@ def test_hopper_launch_says_what_is_wrong_with_a_container_in_one_line(hopper_cl
 
 class ComposedChain:
     """encoder_bridge, state_estimator and event_detector composed as the container composes them,
-    in a context (DDS participant) of their own, spun in a thread; a listener in the test's context."""
+    in a context (DDS participant) of their own, spun in a thread; a listener in the test's context (`listen`:
+    subscribed to the chain's measurements, states and events)."""
 
     def __init__(self, rclpy_session, tmp_path, remapped: bool, listen: bool = True):
         from rclpy.experimental import EventsExecutor
@@ -164,9 +165,9 @@ class ComposedChain:
         self.listener_executor.add_node(self.listener)
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000, reliability=ReliabilityPolicy.RELIABLE)
         self.got = {"measurements": [], "states": [], "events": []}
-        for key, kind, topic in (("measurements", BodyMeasurement, self.measurements),
-                                 ("states", BodyState, "/c/body_state"), ("events", GaitEvent, "/c/gait_event"))[
-                                    :3 if listen else 0]:
+        topics = (("measurements", BodyMeasurement, self.measurements), ("states", BodyState, "/c/body_state"),
+                  ("events", GaitEvent, "/c/gait_event"))
+        for key, kind, topic in topics if listen else ():
             self.listener.create_subscription(kind, topic, lambda msg, key=key: self.got[key].append(msg), qos)
 
     def _spin(self) -> None:
