@@ -53,6 +53,18 @@ def rss_mb(pid: int) -> float:
     return float("nan")
 
 
+def _stop(recorder: subprocess.Popen) -> None:
+    """Stop the bag recorder as Ctrl-C would (it closes the bag), killed if it does not end within a minute."""
+    if recorder.poll() is not None:
+        return
+    os.killpg(recorder.pid, signal.SIGINT)
+    try:
+        recorder.wait(60)
+    except subprocess.TimeoutExpired:
+        os.killpg(recorder.pid, signal.SIGKILL)
+        recorder.wait()
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=60.0)
@@ -72,40 +84,45 @@ def main() -> int:
                                  "--compression", "zstd", *TOPICS], stdout=open(out / "recorder.log", "w"),
                                 stderr=subprocess.STDOUT, start_new_session=True, env=dict(os.environ))
     samples, falls_seen, throws = [], 0, 0
-    with LiveGraph("demo.launch.yaml", out) as graph:
-        if not graph.wait_up():
-            print("soak: the graph did not come up (see launch.log)", file=sys.stderr)
-            return 1
-        if not graph.hop(4, throw=True):
-            print("soak: the robot did not hop after the throw", file=sys.stderr)
-            return 1
-        thrown = time.monotonic()
-        at_throw = {name: dict(values) for name, values in graph.health.items()}
-        end = thrown + 60.0 * args.minutes
-        next_sample = thrown + WARM_UP
-        print(f"soak: hopping; {args.minutes:g} minutes to go", flush=True)
-        while time.monotonic() < end:
-            graph.spin_until(lambda: time.monotonic() >= min(next_sample, end) or graph.seen["falls"] > falls_seen,
-                             max(0.0, min(next_sample, end) - time.monotonic()) + 0.1)
-            if graph.seen["falls"] > falls_seen:                # should not happen: counted, thrown again
-                falls_seen = graph.seen["falls"]
-                throws += 1
-                print(f"soak: FALL {falls_seen} after {(time.monotonic() - thrown) / 60:.1f} min", flush=True)
-                graph.hop(4, throw=True)
-            if time.monotonic() >= next_sample:
-                minute = (time.monotonic() - thrown) / 60.0
-                samples.append({"minute": round(minute, 2), **{label: rss_mb(pid) for label, pid in graph.pids.items()}})
-                print(f"soak: {minute:5.1f} min, {graph.seen['apexes']} strides, falls {graph.seen['falls']}, rss MB "
-                      + ", ".join(f"{k} {v:.1f}" for k, v in samples[-1].items() if k != "minute"), flush=True)
-                next_sample += SAMPLE
-        samples.append({"minute": round((time.monotonic() - thrown) / 60.0, 2),
-                        **{label: rss_mb(pid) for label, pid in graph.pids.items()}})
-        health = loop_health(graph.health, at_throw)
-        strides, falls = graph.seen["apexes"], graph.seen["falls"]
-        respawns = sum(1 for _, line in graph.lines if "respawning it" in line)
-        gc_warnings = sum(1 for _, line in graph.lines if "garbage collection" in line)
-    os.killpg(recorder.pid, signal.SIGINT)
-    recorder.wait(60)
+    try:
+        with LiveGraph("demo.launch.yaml", out) as graph:
+            if not graph.wait_up():
+                print("soak: the graph did not come up (see launch.log)", file=sys.stderr)
+                return 1
+            if not graph.hop(4, throw=True):
+                print("soak: the robot did not hop after the throw", file=sys.stderr)
+                return 1
+            thrown = time.monotonic()
+            at_throw = {name: dict(values) for name, values in graph.health.items()}
+            end = thrown + 60.0 * args.minutes
+            next_sample = thrown + WARM_UP
+            print(f"soak: hopping; {args.minutes:g} minutes to go", flush=True)
+            while time.monotonic() < end:
+                graph.spin_until(lambda: time.monotonic() >= min(next_sample, end) or graph.seen["falls"] > falls_seen,
+                                 max(0.0, min(next_sample, end) - time.monotonic()) + 0.1)
+                if graph.seen["falls"] > falls_seen:                # should not happen: counted, thrown again
+                    falls_seen = graph.seen["falls"]
+                    throws += 1
+                    print(f"soak: FALL {falls_seen} after {(time.monotonic() - thrown) / 60:.1f} min", flush=True)
+                    graph.hop(4, throw=True)
+                if time.monotonic() >= next_sample:
+                    minute = (time.monotonic() - thrown) / 60.0
+                    rss = {label: rss_mb(pid) for label, pid in graph.pids.items()}
+                    samples.append({"minute": round(minute, 2), **rss})
+                    print(f"soak: {minute:5.1f} min, {graph.seen['apexes']} strides, falls {graph.seen['falls']}, "
+                          "rss MB " + ", ".join(f"{k} {v:.1f}" for k, v in rss.items()), flush=True)
+                    next_sample += SAMPLE
+            samples.append({"minute": round((time.monotonic() - thrown) / 60.0, 2),
+                            **{label: rss_mb(pid) for label, pid in graph.pids.items()}})
+            health = loop_health(graph.health, at_throw)
+            strides, falls = graph.seen["apexes"], graph.seen["falls"]
+            respawns = sum(1 for _, line in graph.lines if "respawning it" in line)
+            gc_warnings = sum(1 for _, line in graph.lines if "garbage collection" in line)
+    except KeyboardInterrupt:
+        print(f"soak: interrupted; the recording so far is in {out / 'bag'}", file=sys.stderr)
+        return 130
+    finally:            # the recorder has a session of its own: an interrupt or an early return does not reach it
+        _stop(recorder)
     topics = [DROPPED.match(line) for line in (out / "recorder.log").read_text().splitlines()]
     messages = sum(int(m.group(2)) for m in topics if m)
     dropped = sum(int(m.group(3)) for m in topics if m)
