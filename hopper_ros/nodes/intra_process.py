@@ -149,6 +149,9 @@ class IntraProcessBus:
             for entry in entries:   # first, as rclcpp: the subscriber may run meanwhile
                 if entry.subscription.msg_type is msg_type and not (entry.reliable and best_effort):
                     entry.offer(deserialize_message(msg, msg_type) if isinstance(msg, bytes) else msg)
+            # the matched count includes this container's own DDS readers (in-process entries exist only on
+            # rmw_fastrtps, `ignore_local_publications`, which filters at take: its readers stay matched); more than
+            # those is a subscription outside (a reader that stayed on DDS counts as outside)
             if keeps_history or matched() > len(entries):
                 dds_publish(msg)
 
