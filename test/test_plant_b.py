@@ -69,5 +69,6 @@ def test_a_drag_on_the_way_down_only_is_discovered_and_said(recordings):
     mass, b = 2.20, truth["effects"][0]["magnitude"]
     descending, rising = (terms["zdot"] - terms["|zdot|"]) / mass, (terms["zdot"] + terms["|zdot|"]) / mass
     assert abs(-descending - b) <= 0.2 * b and abs(rising) <= 0.2 * b, terms
+    assert s["by_mechanism"] == ["boom_descent_drag"], s      # the plant's own law, not a look-alike (issue 28)
     for key in ("E_p", "E_v", "E_t"):
         assert getattr(result.after, key) <= getattr(result.before, key) * 1.01 + 1e-6
