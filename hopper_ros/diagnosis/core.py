@@ -33,7 +33,7 @@ from .progress import QUIET, Progress
 from .records import APEX_ERRORS, Diagnosis, Errors, Reference, Scored, completeness
 from .report import verdict
 from .rounds import Log, restarts, revisit, rounds
-from .search import Search
+from .search import Search, refit_jointly
 from .settings import Settings, load_settings  # noqa: F401  (the engine's settings, read here by callers)
 from .simulate import Variant, simulate_variants
 from .unused import find_unused_law, refitted, rescaled
@@ -71,7 +71,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     left = completeness(model.errors, after, floor, residual_location, settings)
     def unused_law():
         scaled, scaled_model = rescaled(search, base_sim["series"], moves)
-        return _with_angle_law(scaled, chosen, scaled_model, find_unused_law, floor, refitted)
+        return _with_angle_law(scaled, chosen, scaled_model, find_unused_law, floor, refitted, settings.unused_laws)
 
     # what the accepted effects leave may depend on the leg angle or its reversals, or on the boom's angle, or on
     # the leg's compression since its last reversal
@@ -183,7 +183,7 @@ def _with_dependence(search: Search, own: StrideData, chosen: list[Scored], drif
 
 
 def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find=find_angle_law,
-                    floor: Errors | None = None, refit=None):
+                    floor: Errors | None = None, refit=None, laws: int = 1):
     """The accepted effects with a law of the leg angle or its reversals (`angle.find_angle_law`; or of the boom's
     angle and the leg's reversals, `unused.find_unused_law`, on its search and model reference) beside them all,
     and in place of each of them (that one may have stood in for it: plant B's backlash was named an actuator lag),
@@ -193,7 +193,11 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     `apex_tolerance`, or, given the noise `floor`, each within `floor_factor` of it: an effect kept beside the law
     for a next apex already at the noise floor is a stand-in, plant C's leg hysteresis beside a boom friction of
     0.007 m/s^2) than the best's; one found in place of an effect only where it `replaces` the accepted set as a
-    whole explanation. None where no law passes its guards."""
+    whole explanation. With `laws` > 1, each set that found a law is searched again for another beside it, up to
+    `laws` laws (several act at once on a robot: plant C's round toe in place of a leg angle offset, then the drive's
+    voltage limit beside it); a set with more laws is kept only where it fits clearly better, as any. Each trial of
+    two or more effects has its magnitudes refitted together (`search.refit_jointly`). None where no law passes its
+    guards."""
     settings, data = search.settings, search.data
     accepted, found = (search.held_out(chosen) if chosen else model), []
     if refit is not None:       # the accepted effects refitted on this search's yardstick (`unused.refitted`)
@@ -202,17 +206,20 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     leave = [()] + [(k,) for k in range(len(chosen))] + ([tuple(range(len(chosen)))] if len(chosen) > 1 else [])
     for left_out in leave:
         kept = copy.deepcopy([r for k, r in enumerate(chosen) if k not in left_out])    # a trial moves magnitudes
-        locations, sets = locate(data, search.stack(kept).variant())
-        located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
-        top = find(search, kept, search.held_out(kept) if kept else model, sets, located)
-        if top is None:
-            continue
-        trial = kept + [top]
-        if len(trial) > 1:
-            revisit(search, trial, Reference(top.held_sse, top.errors))
-        held = search.held_out(trial)
-        if not left_out or acceptance.replaces(held, accepted, model.errors, settings):
-            found.append((held, trial))
+        for _ in range(laws):
+            locations, sets = locate(data, search.stack(kept).variant())
+            located = {loc.site for loc in locations if loc.ratio >= settings.locate_threshold}
+            top = find(search, kept, search.held_out(kept) if kept else model, sets, located)
+            if top is None:
+                break
+            trial = kept + [top]
+            if len(trial) > 1:
+                revisit(search, trial, Reference(top.held_sse, top.errors))
+                refit_jointly(search, trial)
+            held = search.held_out(trial)
+            if not left_out or acceptance.replaces(held, accepted, model.errors, settings):
+                found.append((held, trial))
+            kept = copy.deepcopy(trial)
     if not found:
         return None
     best = min(found, key=lambda f: f[0].sse.sum())[0]

@@ -62,6 +62,7 @@ class Settings:
     servo_releases: int = 5          # the flight servo's release times after touchdown tried (geometric) ...
     servo_release_min: float = 0.005       # [s] ... from this ...
     servo_release_max: float = 0.08        # [s] ... to this
+    unused_laws: int = 2             # laws of what the model does not use found one beside the other
 
 
 _SHARE = {"ge": 0, "le": 1}
@@ -85,6 +86,7 @@ LIMITS = {
     "winding_resistances": _COUNT, "winding_resistance_min": {"gt": 0, "unit": "ohm"},
     "winding_resistance_max": {"gt": 0, "unit": "ohm"}, "servo_releases": _COUNT,
     "servo_release_min": {"gt": 0, "unit": "s"}, "servo_release_max": {"gt": 0, "unit": "s"},
+    "unused_laws": _COUNT,
 }
 
 

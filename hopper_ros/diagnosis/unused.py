@@ -102,7 +102,8 @@ def find_unused_law(search: Search, chosen: list[Scored], current: Reference, se
     laws.append(servo.best_release(search, stack, current, settings))
     laws.append(foot_candidate())
     laws.append(best_candidate(search, stack, sphere_candidates(), current))
-    return win_round(search, chosen, current, laws, located, WHAT)
+    taken = {r.name for r in chosen}      # a law found by an earlier pass is not offered again
+    return win_round(search, chosen, current, [c for c in laws if c.name not in taken], located, WHAT)
 
 
 def on_plain_model(rec, params, settings) -> Scored | None:
