@@ -194,16 +194,21 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     for a next apex already at the noise floor is a stand-in, plant C's leg hysteresis beside a boom friction of
     0.007 m/s^2) than the best's; one found in place of an effect only where it `replaces` the accepted set as a
     whole explanation. With `laws` > 1, each set that found a law is searched again for another beside it, up to
-    `laws` laws (several act at once on a robot: plant C's round toe in place of a leg angle offset, then the drive's
-    voltage limit beside it); a set with more laws is kept only where it fits clearly better, as any. Each trial of
-    two or more effects has its magnitudes refitted together (`search.refit_jointly`). None where no law passes its
-    guards."""
+    `laws` laws where its next apex is not yet within `floor_factor` of the noise floor (several act at once on a
+    robot: plant C's round toe in place of a leg angle offset, then the drive's voltage limit beside it); a set with
+    more laws is kept only where it fits clearly better, as any. Each trial of two or more effects has its magnitudes
+    refitted together (`search.refit_jointly`). None where no law passes its guards."""
     settings, data = search.settings, search.data
     accepted, found = (search.held_out(chosen) if chosen else model), []
     if refit is not None:       # the accepted effects refitted on this search's yardstick (`unused.refitted`)
         accepted = refit(search, chosen, accepted)
     # beside them all, in place of each, and (two or more) in place of them all: each may have stood in for it
     leave = [()] + [(k,) for k in range(len(chosen))] + ([tuple(range(len(chosen)))] if len(chosen) > 1 else [])
+
+    def at_floor(errors):
+        return floor is not None and all(getattr(errors, k) <= settings.floor_factor * getattr(floor, k)
+                                         for k in APEX_ERRORS)
+
     for left_out in leave:
         kept = copy.deepcopy([r for k, r in enumerate(chosen) if k not in left_out])    # a trial moves magnitudes
         for _ in range(laws):
@@ -219,14 +224,13 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
             held = search.held_out(trial)
             if not left_out or acceptance.replaces(held, accepted, model.errors, settings):
                 found.append((held, trial))
+            if at_floor(held.errors):      # its next apex at the noise floor: no second law is looked for
+                break
             kept = copy.deepcopy(trial)
     if not found:
         return None
     best = min(found, key=lambda f: f[0].sse.sum())[0]
 
-    def at_floor(errors):
-        return floor is not None and all(getattr(errors, k) <= settings.floor_factor * getattr(floor, k)
-                                         for k in APEX_ERRORS)
 
     alike = [(len(trial), held.sse.sum(), trial) for held, trial in found
              if acceptance.paired_t(held.sse, best.sse) < settings.tie_t
