@@ -58,7 +58,7 @@ def _one_way(toward: float, against: float, scale: float):
 # or None). A discovered law with exactly these terms and that magnitude within 25 % is the mechanism named, not a
 # look-alike (issue 28: "a law with fitted coefficients and words"). The terms' coefficients (`physics.terms`):
 # flight, vertical a zdot + b |zdot| (a force [N]: a + b rising, a - b descending); along the leg
-# -a rho' - b |rho'| (a + b in extension, a - b in compression) and c tau/rho.
+# -a rho' - b |rho'| (a + b in extension, a - b in compression), c x^2 and c tau/rho.
 DISCOVERED_LAWS = {
     # z'' += -b z' while descending (an acceleration [1/s]): the descending force over the body's mass
     "boom_descent_drag": ({"zdot", "|zdot|"},
@@ -69,6 +69,8 @@ DISCOVERED_LAWS = {
     # F_leg += kappa tau [1/m], the plant's torque of the same sign as the model's: the term tau/rho at the leg's
     # rest length (the leg is within 20 % of it in stance)
     "hip_torque_axial_coupling": ({"tau/rho"}, lambda t: t["tau/rho"] / REST_LENGTH),
+    # F_spring = k x - k2 x^2 [N/m^2]: the term x^2 with the coefficient -k2
+    "softening_leg_spring": ({"x^2"}, lambda t: -t["x^2"]),
 }
 
 

@@ -126,7 +126,8 @@ FLIGHT_Z_TERMS = TermLibrary((
 LEG_TERMS = TermLibrary((
     ("1", "a constant force along the leg", "N"),
     ("x", "a force proportional to the leg's compression (a stiffer spring)", "N/m"),
-    ("x^2", "a force quadratic in the leg's compression (a progressive spring)", "N/m^2"),
+    ("x^2", "a force quadratic in the leg's compression (a progressive spring; a softening one where negative)",
+     "N/m^2"),
     ("x^3", "a force cubic in the leg's compression (a hardening spring)", "N/m^3"),
     ("rho'", "a force proportional to the leg's extension rate (extra leg damping)", "N s/m"),
     ("|rho'|rho'", "a force quadratic in the leg's extension rate", "N s^2/m^2"),
