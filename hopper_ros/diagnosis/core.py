@@ -230,8 +230,6 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     if not found:
         return None
     best = min(found, key=lambda f: f[0].sse.sum())[0]
-
-
     alike = [(len(trial), held.sse.sum(), trial) for held, trial in found
              if acceptance.paired_t(held.sse, best.sse) < settings.tie_t
              and (held.errors.total <= best.errors.total * (1 + settings.apex_tolerance) or at_floor(held.errors))]
