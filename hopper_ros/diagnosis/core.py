@@ -194,8 +194,9 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     for a next apex already at the noise floor is a stand-in, plant C's leg hysteresis beside a boom friction of
     0.007 m/s^2) than the best's; one found in place of an effect only where it `replaces` the accepted set as a
     whole explanation. With `laws` > 1, each set that found a law is searched again for another beside it, up to
-    `laws` laws where its next apex is not yet within `floor_factor` of the noise floor (several act at once on a
-    robot: plant C's round toe in place of a leg angle offset, then the drive's voltage limit beside it); a set with
+    `laws` laws where one of its next apex's errors is still over `second_law_floor` times its noise floor (several
+    act at once on a robot: plant C's round toe in place of a leg angle offset, 16 x the floor, then the drive's
+    voltage limit beside it; the search costs a stage again, so not where the set is nearly explained); a set with
     more laws is kept only where it fits clearly better, as any. Each trial of two or more effects has its magnitudes
     refitted together (`search.refit_jointly`). None where no law passes its guards."""
     settings, data = search.settings, search.data
@@ -207,6 +208,10 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
 
     def at_floor(errors):
         return floor is not None and all(getattr(errors, k) <= settings.floor_factor * getattr(floor, k)
+                                         for k in APEX_ERRORS)
+
+    def far_from_floor(errors):
+        return floor is not None and any(getattr(errors, k) > settings.second_law_floor * getattr(floor, k)
                                          for k in APEX_ERRORS)
 
     for left_out in leave:
@@ -224,7 +229,7 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
             held = search.held_out(trial)
             if not left_out or acceptance.replaces(held, accepted, model.errors, settings):
                 found.append((held, trial))
-            if at_floor(held.errors):      # its next apex at the noise floor: no second law is looked for
+            if not far_from_floor(held.errors):      # a second law only where the next apex is far from explained
                 break
             kept = copy.deepcopy(trial)
     if not found:

@@ -63,6 +63,7 @@ class Settings:
     servo_release_min: float = 0.005       # [s] ... from this ...
     servo_release_max: float = 0.08        # [s] ... to this
     unused_laws: int = 2             # laws of what the model does not use found one beside the other
+    second_law_floor: float = 5.0    # ... the next only where a next-apex error stands this many times over its floor
 
 
 _SHARE = {"ge": 0, "le": 1}
@@ -86,7 +87,7 @@ LIMITS = {
     "winding_resistances": _COUNT, "winding_resistance_min": {"gt": 0, "unit": "ohm"},
     "winding_resistance_max": {"gt": 0, "unit": "ohm"}, "servo_releases": _COUNT,
     "servo_release_min": {"gt": 0, "unit": "s"}, "servo_release_max": {"gt": 0, "unit": "s"},
-    "unused_laws": _COUNT,
+    "unused_laws": _COUNT, "second_law_floor": {"gt": 0},
 }
 
 
