@@ -63,7 +63,7 @@ class Settings:
     servo_release_min: float = 0.005       # [s] ... from this ...
     servo_release_max: float = 0.08        # [s] ... to this
     unused_laws: int = 2             # laws of what the model does not use found one beside the other
-    second_law_floor: float = 5.0    # ... the next only where a next-apex error stands this many times over its floor
+    second_law_floor: float = 10.0   # ... the next only where a next-apex error stands this many times over its floor
 
 
 _SHARE = {"ge": 0, "le": 1}
