@@ -46,8 +46,6 @@ MATCH = {
 }
 
 
-
-
 def _one_way(toward: float, against: float, scale: float):
     """A law acting one way of the motion only: its magnitude (`toward` x `scale`) where the other way's
     coefficient is at most a quarter of it, else None (a law both ways is another law)."""
