@@ -206,13 +206,8 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     # beside them all, in place of each, and (two or more) in place of them all: each may have stood in for it
     leave = [()] + [(k,) for k in range(len(chosen))] + ([tuple(range(len(chosen)))] if len(chosen) > 1 else [])
 
-    def at_floor(errors):
-        return floor is not None and all(getattr(errors, k) <= settings.floor_factor * getattr(floor, k)
-                                         for k in APEX_ERRORS)
-
-    def far_from_floor(errors):
-        return floor is not None and any(getattr(errors, k) > settings.second_law_floor * getattr(floor, k)
-                                         for k in APEX_ERRORS)
+    def within(errors, factor):     # each next-apex error within `factor` of its noise floor
+        return floor is not None and all(getattr(errors, k) <= factor * getattr(floor, k) for k in APEX_ERRORS)
 
     for left_out in leave:
         kept = copy.deepcopy([r for k, r in enumerate(chosen) if k not in left_out])    # a trial moves magnitudes
@@ -229,7 +224,7 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
             held = search.held_out(trial)
             if not left_out or acceptance.replaces(held, accepted, model.errors, settings):
                 found.append((held, trial))
-            if not far_from_floor(held.errors):      # a second law only where the next apex is far from explained
+            if floor is None or within(held.errors, settings.second_law_floor):   # a second law only far from explained
                 break
             kept = copy.deepcopy(trial)
     if not found:
@@ -237,7 +232,8 @@ def _with_angle_law(search: Search, chosen: list[Scored], model: Reference, find
     best = min(found, key=lambda f: f[0].sse.sum())[0]
     alike = [(len(trial), held.sse.sum(), trial) for held, trial in found
              if acceptance.paired_t(held.sse, best.sse) < settings.tie_t
-             and (held.errors.total <= best.errors.total * (1 + settings.apex_tolerance) or at_floor(held.errors))]
+             and (held.errors.total <= best.errors.total * (1 + settings.apex_tolerance)
+                  or within(held.errors, settings.floor_factor))]
     return min(alike, key=lambda f: f[:2])[2]
 
 
