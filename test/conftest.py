@@ -139,7 +139,13 @@ class CliProcess:
                 self._changed.wait(min(left, 0.5))
 
     def wait(self, timeout: float = SAFETY_TIMEOUT) -> int:
-        status = self.process.wait(timeout)
+        try:
+            status = self.process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.signal(signal.SIGUSR1)      # the hopper CLI writes every thread's stack (faulthandler)
+            time.sleep(1.0)
+            raise AssertionError(f"{self.argv[3:]} still running after {timeout} s\n--- stdout\n{self.stdout}"
+                                 f"--- stderr\n{self.stderr}") from None
         for reader in self._readers:
             reader.join(timeout)
         return status

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# `make setup`: build the development environment in .venv, in three stages, each redone
+# `make setup`: build the development environment in .venv, in stages, each redone
 # only when its inputs changed (content hashes in .venv/.hopper-stamps/):
 #   deps  - create .venv, pip install the pinned ROS 2 wheels and Python deps
 #           (inputs: requirements/*.txt)
@@ -10,6 +10,8 @@
 #   foxglove - npm ci of Foxglove's MCAP / ROS 2 libraries into .venv/foxglove, for
 #           test/test_foxglove.py (inputs: test/foxglove/package*.json); skipped, and said so,
 #           where Node.js or npm is absent
+#   kernels - the numba kernels compiled into their disk cache (tools/warm_kernels.py; inputs: pkg,
+#           the kernels' sources and their times)
 # The no-op path runs no Python at all (every venv Python is re-executed once by
 # ros-wheels-bootstrapper), only sha256sum over the inputs.
 #
@@ -186,5 +188,17 @@ else
     exit 1
   fi
   stage_done foxglove "$foxglove_key"
+fi
+# ---------------------------------------------------------------- kernels
+# Every numba kernel compiled into the disk cache once here (tools/warm_kernels.py), not by each process that first
+# needs it (make test's sessions and simulated robots side by side). numba also checks its sources' times, so
+# those are in the key with their contents.
+kernel_sources=(hopper_ros/physics/*.py hopper_ros/diagnosis/compiled.py hopper_ros/sim/plant.py tools/warm_kernels.py)
+kernels_key="$pkg_key ${NUMBA_CACHE_DIR:-} $(hash_files "${kernel_sources[@]}") $(stat -c %Y "${kernel_sources[@]}" | sha256sum | cut -c1-16)"
+if stage_current kernels "$kernels_key"; then
+  say "kernels up to date"
+else
+  "$VENV/bin/python" tools/warm_kernels.py
+  stage_done kernels "$kernels_key"
 fi
 say "ready: $VENV"

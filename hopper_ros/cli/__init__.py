@@ -9,7 +9,9 @@ a subcommand by writing its module and adding one line here.
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import importlib
+import signal
 import sys
 from typing import Sequence
 
@@ -48,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    if hasattr(signal, "SIGUSR1"):     # `kill -USR1 PID`: where every thread of a stuck hopper process is, on stderr
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         apply_ros_environment()
     except RosEnvironmentError as exc:

@@ -5,9 +5,10 @@
 `ones_like`, `nan_to_num`, `nonzero`, `is_on`). A lane's `Coefficients` is one record of a structured
 array whose fields are the dataclass's (`record_dtype`), so `c.stiffness` reads the same in both.
 
-`integrate` steps every lane on its own, exactly as `physics.lanes` steps them together (RK4 at h, the
-guard's sign change located by linear interpolation and the step split there, collapse and tipping
-checks after each step), so the two paths agree to rounding. A lane that has fallen keeps its state,
+`integrate` steps every lane on its own, exactly as `physics.lanes` steps them together (RK4 at h, a
+flight's sample in one step where no event falls in it, the guard's sign change located by linear
+interpolation and the step split there, collapse and tipping checks after each step), so the two paths
+agree to rounding. A lane that has fallen keeps its state,
 and its remaining samples are copied instead of integrated; a lane given a number of `needed` samples
 stops once it has them and has found its next apex (or fallen), its later samples nan.
 
@@ -245,6 +246,18 @@ def _lane(c, lane, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h
             for q in range(5):
                 out[q, lane, j] = out[q, lane, j - 1]
             continue
+        if mode == DESCENT or mode == ASCENT:       # a flight's sample in one step, where no event falls in it
+            big = h * steps_per_sample
+            s1 = _rk4(c, t, s, k, big, mode, apex_found, ground_clearance, t_td, tau_0, t_f, theta_at_td, lagged, lag,
+                      compliant)
+            k1, g1 = _evaluate(c, t + big, s1, mode, apex_found, ground_clearance, t_td, tau_0, t_f, theta_at_td,
+                               lagged, lag, compliant)
+            if not (g > 0 and g1 <= 0 and np.isfinite(g)):
+                s, k, g = s1, k1, g1
+                for _ in range(steps_per_sample):
+                    t += h
+                _record(c, s, mode, theta_hold, out, lane, j)
+                continue
         for _ in range(steps_per_sample):
             s1 = _rk4(c, t, s, k, h, mode, apex_found, ground_clearance, t_td, tau_0, t_f, theta_at_td, lagged, lag,
                       compliant)
