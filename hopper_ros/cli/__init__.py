@@ -50,8 +50,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    if hasattr(signal, "SIGUSR1"):     # `kill -USR1 PID`: where every thread of a stuck hopper process is, on stderr
+    try:             # `kill -USR1 PID`: where every thread of a stuck hopper process is, on stderr
         faulthandler.register(signal.SIGUSR1, all_threads=True)
+    except (AttributeError, OSError, ValueError):
+        pass         # no SIGUSR1 here, or stderr is not a file (called in-process with its output captured)
     try:
         apply_ros_environment()
     except RosEnvironmentError as exc:

@@ -83,12 +83,13 @@ def vertex(grid: np.ndarray, values: np.ndarray) -> float:
     (an SSE is quadratic in a magnitude near its minimum; its logarithm is not)."""
     k = int(np.argmin(values))
     j = min(max(k, 1), len(grid) - 2)
-    x, y = grid[j - 1:j + 2], values[j - 1:j + 2]
-    a = np.polyfit(x, y, 2)
-    if a[0] <= 0:
+    xs, ys = grid[j - 1:j + 2], values[j - 1:j + 2]
+    d1 = (ys[1] - ys[0]) / (xs[1] - xs[0])           # divided differences, as `newton`
+    d2 = ((ys[2] - ys[1]) / (xs[2] - xs[1]) - d1) / (xs[2] - xs[0])
+    if d2 <= 0:
         return float(grid[k])
     lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
-    return float(np.clip(-a[1] / (2 * a[0]), lo, hi))
+    return float(np.clip((xs[0] + xs[1]) / 2 - d1 / (2 * d2), lo, hi))
 
 
 def quadratic_at(grid: np.ndarray, values: np.ndarray, x: float) -> np.ndarray:
