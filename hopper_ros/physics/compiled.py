@@ -8,9 +8,9 @@ array whose fields are the dataclass's (`record_dtype`), so `c.stiffness` reads 
 `integrate` steps every lane on its own, exactly as `physics.lanes` steps them together (RK4 at h, a
 flight's sample in one step where no event falls in it, the guard's sign change located by linear
 interpolation and the step split there, collapse and tipping checks after each step), so the two paths
-agree to rounding. A lane that has fallen keeps its state,
-and its remaining samples are copied instead of integrated; a lane given a number of `needed` samples
-stops once it has them and has found its next apex (or fallen), its later samples nan.
+agree to rounding. A lane that has fallen keeps its state, and its remaining samples are copied instead
+of integrated; a lane given a number of `needed` samples stops once it has them and has found its next
+apex (or fallen), its later samples nan.
 
 `compile_kernels` compiles other modules' functions written the same way (the simulated robot's step,
 `hopper_ros.sim.plant`) with these laws.
