@@ -191,3 +191,27 @@ def test_recorder_counts_every_message_it_could_not_keep(rclpy_session, tmp_path
     recorder.report_drops()
     assert any(line.startswith(f"DROPPED {dropped} message(s) of /recorder_test_behind") for line in lines), lines
     assert "dropped " + str(dropped) in "\n".join(recorder.summary())
+
+
+def test_a_ros_shutdown_that_hangs_does_not_keep_the_recorder_from_ending(tmp_path):
+    """`hopper bag record` with rclpy's shutdown made to hang (a DDS teardown that never returns): once its bag is
+    closed the recorder waits its grace and exits with its status, saying why and where each thread stood; the bag
+    is complete."""
+    import subprocess
+    import sys
+
+    from conftest import REPO
+
+    script = (
+        "import time, rclpy\n"
+        "import hopper_ros.cli.bag as bag\n"
+        "bag._SHUTDOWN_GRACE = 1.0\n"
+        "rclpy.try_shutdown = lambda *a, **k: time.sleep(3600)\n"
+        "from hopper_ros.cli import main\n"
+        f"raise SystemExit(main(['bag', 'record', '-a', '-o', {str(tmp_path / 'bag')!r}, '-d', '0.5']))\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True,
+                          timeout=SAFETY_TIMEOUT)      # before the grace: the recorder waited here for an hour
+    assert done.returncode == 0, done.stderr
+    assert "closed:" in done.stderr and "has not ended in 1 s (the bag is closed)" in done.stderr, done.stderr
+    assert "Thread" in done.stderr, done.stderr                  # faulthandler's stacks
+    assert bag_info(tmp_path / "bag").complete
