@@ -214,4 +214,6 @@ def test_a_ros_shutdown_that_hangs_does_not_keep_the_recorder_from_ending(tmp_pa
     assert done.returncode == 0, done.stderr
     assert "closed:" in done.stderr and "has not ended in 1 s (the bag is closed)" in done.stderr, done.stderr
     assert "Thread" in done.stderr, done.stderr                  # faulthandler's stacks
-    assert bag_info(tmp_path / "bag").complete
+    info = bag_info(tmp_path / "bag")
+    assert info.complete, info.problems
+    assert len(rosbags_messages(tmp_path / "bag")) == info.message_count      # an independent reader opens it
