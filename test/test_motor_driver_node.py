@@ -220,3 +220,31 @@ def test_sigint_disables_the_drive_first(rclpy_session, hopper_cli, drive, drive
     finally:
         executor.shutdown()
         node.destroy_node()
+
+
+def test_a_ros_teardown_that_hangs_after_the_drive_is_disabled_does_not_keep_the_node_running(
+        rclpy_session, hopper_cli, drive, driver_config, tmp_path):
+    """CI once saw the motor driver, its drive confirmed disabled, still inside rclpy's native node teardown 60 s after
+    its SIGINT. Here every rclpy node's teardown is made to hang (a sitecustomize in the child): the node disables the
+    drive, waits the shutdown's grace, says so with every thread's stack and exits with its status."""
+    (tmp_path / "sitecustomize.py").write_text(
+        "import time\n"
+        "import rclpy.node\n"
+        "import hopper_ros.nodes.shutdown_guard as guard\n"
+        "guard.SHUTDOWN_GRACE = 1.0\n"
+        "_destroy = rclpy.node.Node.destroy_node\n"
+        "def _hangs(self):\n"
+        "    _destroy(self)\n"
+        "    time.sleep(3600)\n"
+        "rclpy.node.Node.destroy_node = _hangs\n")
+    process = hopper_cli("run", "motor_driver", "--ros-args", "-p", "interface:=socketcand", "-p", "host:=127.0.0.1",
+                         "-p", f"port:={drive.hub.port}", "-p", f"config_file:={driver_config}",
+                         env={"PYTHONPATH": str(tmp_path)})
+    process.wait_for_line(r"drive 1 configured and started")
+    drive.wait_for(lambda: drive.drive.state is State.SWITCH_ON_DISABLED)
+    process.signal(signal.SIGINT)
+    assert process.wait(SAFETY_TIMEOUT) == 0, process.stderr    # before the guard: still waiting at this timeout
+    assert "drive disabled (confirmed by the drive)" in process.stderr
+    assert "motor_driver: the ROS shutdown has not ended in 1 s" in process.stderr, process.stderr
+    assert "Current thread" in process.stderr                   # faulthandler's stacks: where it hung
+    assert drive.drive.state is State.SWITCH_ON_DISABLED

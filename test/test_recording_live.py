@@ -204,8 +204,8 @@ def test_a_ros_shutdown_that_hangs_does_not_keep_the_recorder_from_ending(tmp_pa
 
     script = (
         "import time, rclpy\n"
-        "import hopper_ros.cli.bag as bag\n"
-        "bag._SHUTDOWN_GRACE = 1.0\n"
+        "import hopper_ros.nodes.shutdown_guard\n"
+        "hopper_ros.nodes.shutdown_guard.SHUTDOWN_GRACE = 1.0\n"
         "rclpy.try_shutdown = lambda *a, **k: time.sleep(3600)\n"
         "from hopper_ros.cli import main\n"
         f"raise SystemExit(main(['bag', 'record', '-a', '-o', {str(tmp_path / 'bag')!r}, '-d', '0.5']))\n")

@@ -12,11 +12,9 @@ says it is unfinished, `recover` makes it complete. Format: hopper_ros/recording
 from __future__ import annotations
 
 import argparse
-import faulthandler
 import json
 import os
 import sys
-import threading
 import time
 
 HELP = "record topics into a rosbag2 bag (MCAP), show a bag, recover an interrupted one (like `ros2 bag`)"
@@ -25,7 +23,6 @@ _POLL_PERIOD = 0.25   # [s] between looks at the graph for new topics
 _FAST_POLL_PERIOD = 0.02   # [s] ... while named topics are still missing (the bag starts sooner)
 _FAST_POLL_FOR = 10.0      # [s] ... during the first seconds only
 _STOP_LATENCY = 0.05       # [s] the recorder's wait for messages: how soon Ctrl-C is seen
-_SHUTDOWN_GRACE = 10.0     # [s] the ROS shutdown's time once the bag is closed, before the recorder exits anyway
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -104,6 +101,7 @@ def _recover_main(args) -> int:
 
 
 def _record(args) -> int:
+    from hopper_ros.nodes.shutdown_guard import ShutdownGuard
     from hopper_ros.nodes.signals import StopSignals
     from hopper_ros.recording.bag import BagError, BagWriter
 
@@ -170,20 +168,10 @@ def _record(args) -> int:
         except Exception as exc:  # noqa: BLE001
             log(f"hopper bag record: error closing {bag.path}: {exc} (run `hopper bag recover {bag.path}`)")
             status = 1
-        # the bag is complete: a DDS shutdown that hangs must not keep the recorder from ending
-        guard = threading.Timer(_SHUTDOWN_GRACE, _exit_after_stalled_shutdown, (status, log))
-        guard.daemon = True
-        guard.start()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-        guard.cancel()
+        with ShutdownGuard("hopper bag record", "the bag is closed", status):   # a hung DDS teardown
+            if node is not None:                                                 # cannot keep it running
+                node.destroy_node()
+            rclpy.try_shutdown()
         stop.uninstall()
     return status
 
-
-def _exit_after_stalled_shutdown(status: int, log) -> None:
-    log(f"hopper bag record: the ROS shutdown has not ended in {_SHUTDOWN_GRACE:.0f} s (the bag is closed); "
-        f"where each thread stands:")
-    faulthandler.dump_traceback(all_threads=True)
-    os._exit(status)

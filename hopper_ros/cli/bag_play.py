@@ -55,6 +55,7 @@ def _play(args) -> int:
 
 def _play_main(args) -> int:
     from hopper_ros.runtime.messages import message_class
+    from hopper_ros.nodes.shutdown_guard import ShutdownGuard
     from hopper_ros.nodes.signals import StopSignals
     from hopper_ros.recording.bag import BagReader, bag_info
     from hopper_ros.recording.play import PlayStats, Schedule, wait_until
@@ -130,7 +131,8 @@ def _play_main(args) -> int:
     finally:
         late = f", {stats.late} more than 5 ms late (max {stats.max_late * 1e3:.1f} ms)" if stats.late else ""
         print(f"played {stats.published} messages in {stats.loops} loop(s){late}", file=sys.stderr, flush=True)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        with ShutdownGuard("hopper bag play", "its messages are sent", 1 if sys.exc_info()[0] else 0):
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
         stop.uninstall()

@@ -83,23 +83,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from hopper_ros.nodes.shutdown_guard import ShutdownGuard
     from hopper_ros.nodes.signals import StopSignals
 
     stop = StopSignals().install()  # Ctrl-C / SIGTERM end the command cleanly (exit 0)
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    node = None
+    node, status = None, 1
     try:
         rclpy.init(args=["hopper"], signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node(f"_hopper_topic_{os.getpid()}", start_parameter_services=False)
         stop.attach(node)
-        return args._verb(args, node, stop)
+        status = args._verb(args, node, stop)
+        return status
     finally:
         stop.detach()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        with ShutdownGuard(f"hopper topic {args.verb}", "its work is done", status or 0):
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
         stop.uninstall()
 
 

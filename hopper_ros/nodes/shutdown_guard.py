@@ -1,0 +1,47 @@
+"""A ROS teardown that hangs must not keep a process from ending.
+
+rclpy's `Node.destroy_node` and `rclpy.try_shutdown` end in the DDS participant's teardown, which was
+seen to hang under load (CI, twice: a recorder after its bag was closed, the motor driver after the
+drive had confirmed it was disabled, both inside rclpy's native `destroy_when_not_in_use`). The work
+that matters is done before it: `ShutdownGuard` gives the teardown `grace` seconds, then says so on
+stderr with every thread's stack and ends the process with the status it was going to return.
+"""
+
+from __future__ import annotations
+
+import faulthandler
+import os
+import sys
+import threading
+
+SHUTDOWN_GRACE = 10.0   # [s] the ROS teardown's time once a process's own work is done
+
+
+class ShutdownGuard:
+    """`with ShutdownGuard(who, done, status): <ROS teardown>`: if the block has not ended after
+    `grace` seconds, print "<who>: the ROS shutdown has not ended in N s (<done>); ...", the stacks,
+    and `os._exit(status)`."""
+
+    def __init__(self, who: str, done: str, status: int, grace: float | None = None) -> None:
+        self.who, self.done, self.status = who, done, status
+        self.grace = SHUTDOWN_GRACE if grace is None else grace
+        self._timer: threading.Timer | None = None
+
+    def __enter__(self) -> "ShutdownGuard":
+        self._timer = threading.Timer(self.grace, self._give_up)
+        self._timer.daemon = True
+        self._timer.start()
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self._timer.cancel()
+
+    def _give_up(self) -> None:
+        print(f"{self.who}: the ROS shutdown has not ended in {self.grace:.0f} s ({self.done}); "
+              f"exiting with status {self.status}; where each thread stands:", file=sys.stderr, flush=True)
+        try:
+            faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+        except (AttributeError, ValueError, OSError):   # stderr is no file (captured): the line above is all
+            pass
+        sys.stdout.flush()
+        os._exit(self.status)
