@@ -53,6 +53,9 @@ SAME: dict = {mechanism: {} for mechanism in NEAR}
 # magnitude: the leg force's Bouc-Wen hysteresis bound k_h x_y [N]; the azimuth encoder's eccentricity e [m]
 SAME["spring_hysteresis"] = {"leg_hysteresis": lambda m: m}
 SAME["azimuth_eccentricity"] = {"y_periodic": lambda m: m}
+# trapped air leaking from the leg (`diagnosis.relaxation`, a Maxwell element): its small-signal stiffness
+# gamma p_a A^2 / V_0 [N/m], the mechanism's own magnitude, is the relaxing spring's k_r
+SAME["air_chamber"] = {"leg_relaxation": lambda m: m}
 # the leg's swing in flight reacting on the body (`diagnosis.swing`): mu r_c [m], the mechanism's own magnitude
 SAME["leg_swing_reaction"] = {"leg_swing": lambda m: m}
 # the hip motor's current limited by the drive's voltage against its back-EMF (`diagnosis.backemf`): V [V]

@@ -82,6 +82,26 @@ def test_the_laws_turn_after_a_reversal_and_read_a_periodic_error():
     assert slope == pytest.approx((periodic_y(y + 1e-7, 0.003, -0.001, 1.8)[0] - error) / 1e-7, rel=1e-4, abs=1e-9)
 
 
+def test_the_relaxing_leg_force_is_an_air_spring_that_leaks_and_a_maxwell_element_without_a_chamber():
+    """Without a leak the force is the adiabatic gas's, p_a A ((L / (L - x))^1.4 - 1) with k_r = 1.4 p_a A / L; with
+    1/L = 0 a compression at a constant rate v gives the Maxwell element's k_r v tau_r (1 - exp(-t / tau_r))."""
+    area, length, p_a = 4e-4, 0.08, 101325.0
+    stiffness = laws.AIR_ADIABATIC_INDEX * p_a * area / length
+    c = laws.Coefficients(leg_relaxing_stiffness=stiffness, leg_relaxation_time=1e9, leg_relaxation_curvature=1 / length)
+    force, x, dx = 0.0, 0.0, 1e-6
+    while x < 0.03 - 1e-12:                                 # 30 mm, RK2 in the compression
+        half = force + 0.5 * dx * laws.relaxation_rate(c, force, x, 1.0)
+        force += dx * laws.relaxation_rate(c, half, x + 0.5 * dx, 1.0)
+        x += dx
+    assert force == pytest.approx(p_a * area * ((length / (length - 0.03)) ** 1.4 - 1.0), rel=1e-6)
+    c = laws.Coefficients(leg_relaxing_stiffness=600.0, leg_relaxation_time=0.02)
+    force, dt, speed = 0.0, 1e-6, 0.5
+    for _ in range(40000):                                  # 40 ms at 0.5 m/s
+        half = force + 0.5 * dt * laws.relaxation_rate(c, force, 0.0, speed)
+        force += dt * laws.relaxation_rate(c, half, 0.0, speed)
+    assert force == pytest.approx(600.0 * speed * 0.02 * (1.0 - math.exp(-2.0)), rel=1e-6)
+
+
 def test_hysteresis_in_the_leg_force_is_named_by_its_bound_not_a_dry_friction(recordings):
     """Plant C's Bouc-Wen leg force of +-5 N (k_h x_y): named `leg_hysteresis` within 25 %, in words and --json,
     not the library's dry friction along the leg (its look-alike) nor by no law at all."""

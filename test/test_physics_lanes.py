@@ -41,6 +41,10 @@ def _variants() -> list[laws.Coefficients]:
     out += [base.replace(track_gravity=a) for a in (0.13, -0.13)]     # a tilted boom axis (diagnosis.dependence)
     # a Bouc-Wen hysteresis in the leg force (diagnosis.unused), a state of the lanes
     out += [base.replace(leg_hysteresis=f, leg_hysteresis_yield=x) for f, x in ((3.0, 0.002), (10.0, 0.0005))]
+    # a relaxing leg force (a Maxwell element: air leaking from the leg, diagnosis.relaxation), a state of the lanes,
+    # alone and beside the hysteresis
+    out += [base.replace(leg_relaxing_stiffness=k, leg_relaxation_time=r) for k, r in ((600.0, 0.03), (1500.0, 0.005))]
+    out.append(base.replace(leg_relaxing_stiffness=800.0, leg_relaxation_time=0.02, leg_hysteresis=3.0))
     # a round toe rolling in stance (diagnosis.foot): its centre the toe's state, alone and beside a hip friction
     out += [base.replace(foot_radius=r) for r in (0.01, 0.03)]
     out.append(effects.apply(base.replace(foot_radius=0.02), {"hip_dry_friction": 0.05})[0])

@@ -125,7 +125,8 @@ def stride_residuals(t, y, z, theta, theta_td, tau_0, t_f, c: laws.Coefficients)
             command = laws.ramp_torque(since - float(c.torque_delay), tau_0, t_f)
             applied = laws.actuator_torque(c, command)
             f = laws.stance_forces(c, yy, zz, vy, vz, 0.0, toe, applied, command=command, theta_td=theta_td,
-                                   since_touchdown=since, hysteresis=_hysteresis(c, yy - toe, zz))
+                                   since_touchdown=since, hysteresis=_hysteresis(c, yy - toe, zz),
+                                   relaxation=_relaxation(c, yy - toe, zz, tt))
             ry, rz = m * (ay - f.ydd), m * (az - f.zdd)
             ry = ry * (1.0 + float(c.horizontal_mass_ratio))
             along = -f.sin * ry + f.cos * rz
@@ -402,6 +403,21 @@ def _hysteresis(c, dy: np.ndarray, hz: np.ndarray):
     for k in range(1, len(x)):      # rate-independent: the rate of a compression step is the state's step
         q[k] = float(np.clip(q[k - 1] + laws.hysteresis_rate(c, q[k - 1], x[k] - x[k - 1]), -1.0, 1.0))
     return q
+
+
+def _relaxation(c, dy: np.ndarray, hz: np.ndarray, t: np.ndarray):
+    """The leg's relaxing force (`laws.relaxation_rate`) along a stance's recorded compression, from 0 at its first
+    sample (0 where the law is off): RK2 steps between samples, the compression's rate constant over each."""
+    if not laws.is_on(c, "leg_relaxing_stiffness"):
+        return 0.0
+    x = float(c.rest_length) - np.sqrt(dy * dy + hz * hz)
+    force = np.zeros_like(x)
+    for k in range(1, len(x)):
+        dt = max(float(t[k] - t[k - 1]), 1e-9)
+        rate = (x[k] - x[k - 1]) / dt
+        half = force[k - 1] + 0.5 * dt * laws.relaxation_rate(c, force[k - 1], x[k - 1], rate)
+        force[k] = force[k - 1] + dt * laws.relaxation_rate(c, half, 0.5 * (x[k - 1] + x[k]), rate)
+    return force
 
 
 def timing_location(data: StrideData, variant: Variant) -> Location | None:

@@ -1,6 +1,7 @@
 """Laws of what the model does not use, judged on the trajectory test's noise level (issue 28, point 1): the boom's
 angle about its vertical axis (`azimuth`: the forward position read with an error periodic in it), the leg's
-compression since its last reversal (`hysteresis`: a hysteretic leg force), the leg's angle in flight (`swing`:
+compression since its last reversal (`hysteresis`: a hysteretic leg force), the leg's compression rate over its
+history (`relaxation`: a leg force that relaxes, a Maxwell element), the leg's angle in flight (`swing`:
 the body's recoil against the leg swung in flight), the leg's speed beside the command (`backemf`: the drive's
 voltage limiting the motor's current against its back-EMF), the time since touchdown beside the leg angle
 (`servo`: the flight's position servo released late), the contact point's motion in stance (`foot`: a round
@@ -25,7 +26,7 @@ import dataclasses
 
 import numpy as np
 
-from . import backemf, hysteresis, servo
+from . import backemf, hysteresis, relaxation, servo
 from .angle import best_candidate, win_round
 from .azimuth import eccentricity_candidate, find_eccentricity
 from .candidates import Candidate
@@ -80,8 +81,8 @@ def refitted(search: Search, chosen: list[Scored], current: Reference) -> Refere
 
 
 def find_unused_law(search: Search, chosen: list[Scored], current: Reference, sets, located: set) -> Scored | None:
-    """The boom angle's periodic reading error (where its scan stands on held-out strides), the leg's hysteresis, the
-    leg's swing in flight, the drive's voltage limit, the servo released late, a round toe rolling in stance or the
+    """The boom angle's periodic reading error (where its scan stands on held-out strides), the leg's hysteresis, its
+    relaxing force, the leg's swing in flight, the drive's voltage limit, the servo released late, a round toe rolling in stance or the
     boom's sphere, where it wins a round beside the accepted effects against the library's (each judged against the
     accepted effects `refitted` on this search); None otherwise."""
     settings = search.settings
@@ -93,6 +94,7 @@ def find_unused_law(search: Search, chosen: list[Scored], current: Reference, se
         laws.append(best_candidate(search, stack, [eccentricity_candidate(e) for e in eccentric], current))
     yields = hysteresis.yields(settings)
     laws.append(best_candidate(search, stack, [hysteresis.hysteresis_candidate(x) for x in yields], current))
+    laws.append(relaxation.best_relaxation(search, stack, current, settings))
     laws.append(swing_candidate())
     constant, command = backemf.motor_constant(), float(np.max(np.abs(search.data.strides.tau_0), initial=0.0))
     if command > 0.0:

@@ -36,7 +36,8 @@ from . import laws
 from .exact import COLLAPSE_FRACTION, MAX_LEG_ANGLE
 
 DESCENT, STANCE, ASCENT, DEAD = 0, 1, 2, 3
-STATE = 8          # y, z, ydot, zdot, depth, applied torque (lag state), toe y, the leg's hysteresis state
+STATE = 9          # y, z, ydot, zdot, depth, applied torque (lag state), toe y, the leg's hysteresis state, its
+#                    relaxing force
 
 
 def _sources_hash() -> str:
@@ -125,7 +126,8 @@ def _is_on(c, name):
 for _law in (laws.ramp_torque, laws.smooth_sign, laws.flight_y_term, laws.flight_z_term, laws.leg_term,
              laws.hip_term, laws.jump_term, laws.sum_terms, laws.boom_sphere, laws.flight_acceleration,
              laws.stance_context,
-             laws.leg_force, laws.hysteresis_rate, laws.hip_losses, laws.voltage_limited, laws.servo_hold,
+             laws.leg_force, laws.hysteresis_rate, laws.relaxation_rate, laws.hip_losses, laws.voltage_limited,
+             laws.servo_hold,
              laws.rotor_torque,
              laws.stance_forces,
              laws.toe_slip_rate,
@@ -167,7 +169,7 @@ def records(c: laws.Coefficients, n: int) -> np.ndarray:
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def _axpy(s, a, k):
     return (s[0] + a * k[0], s[1] + a * k[1], s[2] + a * k[2], s[3] + a * k[3], s[4] + a * k[4], s[5] + a * k[5],
-            s[6] + a * k[6], s[7] + a * k[7])
+            s[6] + a * k[6], s[7] + a * k[7], s[8] + a * k[8])
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -179,12 +181,13 @@ def _evaluate(c, t, s, mode, apex_found, ground_clearance, t_td, tau_0, t_f, the
         target = laws.actuator_torque(c, command)
         applied = s[5] if lagged else target
         f = laws.stance_forces(c, s[0], s[1], s[2], s[3], s[4], s[6], applied, command, theta_at_td, t - t_td,
-                               compliant, s[7])
+                               compliant, s[7], s[8])
         lag_rate = (target - s[5]) / lag if lagged else 0.0
-        return ((s[2], s[3], f.ydd, f.zdd, f.depth_rate, lag_rate, f.toe_rate, f.hysteresis_rate),
+        return ((s[2], s[3], f.ydd, f.zdd, f.depth_rate, lag_rate, f.toe_rate, f.hysteresis_rate,
+                 f.relaxation_rate),
                 np.minimum(f.force, c.rest_length - f.rho))
     if mode == DEAD:
-        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), np.inf
+        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), np.inf
     ay, az = laws.flight_acceleration(c, s[0], s[1], s[2], s[3])
     if mode == DESCENT:
         guard = s[1] - ground_clearance
@@ -192,7 +195,7 @@ def _evaluate(c, t, s, mode, apex_found, ground_clearance, t_td, tau_0, t_f, the
         guard = s[3]
     else:
         guard = np.inf
-    return (s[2], s[3], ay, az, 0.0, 0.0, 0.0, 0.0), guard
+    return (s[2], s[3], ay, az, 0.0, 0.0, 0.0, 0.0, 0.0), guard
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -208,7 +211,8 @@ def _rk4(c, t, s, k1, h, mode, apex_found, ground_clearance, t_td, tau_0, t_f, t
     return (s[0] + w * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0]), s[1] + w * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1]),
             s[2] + w * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2]), s[3] + w * (k1[3] + 2 * k2[3] + 2 * k3[3] + k4[3]),
             s[4] + w * (k1[4] + 2 * k2[4] + 2 * k3[4] + k4[4]), s[5] + w * (k1[5] + 2 * k2[5] + 2 * k3[5] + k4[5]),
-            s[6] + w * (k1[6] + 2 * k2[6] + 2 * k3[6] + k4[6]), s[7] + w * (k1[7] + 2 * k2[7] + 2 * k3[7] + k4[7]))
+            s[6] + w * (k1[6] + 2 * k2[6] + 2 * k3[6] + k4[6]), s[7] + w * (k1[7] + 2 * k2[7] + 2 * k3[7] + k4[7]),
+            s[8] + w * (k1[8] + 2 * k2[8] + 2 * k3[8] + k4[8]))
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -225,7 +229,7 @@ def _record(c, s, mode, theta_hold, out, lane, j):
 @numba.njit(cache=True, error_model="numpy")
 def _lane(c, lane, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h, steps_per_sample, samples,
           needed, out, apex, events, fell):
-    s = (0.0, apex_height, forward_speed, 0.0, 0.0, 0.0, np.nan, 0.0)
+    s = (0.0, apex_height, forward_speed, 0.0, 0.0, 0.0, np.nan, 0.0, 0.0)
     theta_hold = theta_at_td = theta_td
     t_f = max(ramp_duration, 1e-6)
     lagged = c.torque_lag > 0
@@ -274,7 +278,8 @@ def _lane(c, lane, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h
                     vy, vz = laws.touchdown_velocity(c, theta_hold, s1[2], s1[3])
                     t_td = te
                     theta_at_td = theta_hold
-                    s1 = (s1[0], s1[1], vy, vz, 0.0, 0.0, laws.foot_at_touchdown(c, s1[0], theta_hold), 0.0)
+                    s1 = (s1[0], s1[1], vy, vz, 0.0, 0.0, laws.foot_at_touchdown(c, s1[0], theta_hold), 0.0,
+                          0.0)
                     new_mode = STANCE
                 elif mode == STANCE:
                     dy, hz = laws.foot_offset(c, s1[0], s1[1], s1[4], s1[6])
@@ -283,7 +288,7 @@ def _lane(c, lane, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h
                     theta_hold = theta_lo
                     ground_clearance = laws.touchdown_height(c, theta_hold)
                     t_lo = te
-                    s1 = (s1[0], s1[1], vy, vz, 0.0, s1[5], s1[6], s1[7])
+                    s1 = (s1[0], s1[1], vy, vz, 0.0, s1[5], s1[6], s1[7], s1[8])
                     new_mode = ASCENT if s1[3] > 0 else DEAD
                 elif mode == ASCENT:
                     apex[0, lane], apex[1, lane], apex[2, lane], apex[3, lane] = te, s1[0], s1[1], s1[2]

@@ -12,7 +12,8 @@ model integrate the same laws their own way.
 
 State per lane: y, z, y', z', toe depth (compliant ground), applied torque (first-order actuator lag),
 the toe's forward position (it slides on a ground of finite friction; a round toe's centre, which rolls:
-`laws.stance_forces`), the leg's hysteresis state (reset at touchdown, `laws.hysteresis_rate`).
+`laws.stance_forces`), the leg's hysteresis state (reset at touchdown, `laws.hysteresis_rate`) and its relaxing force (reset at
+touchdown, `laws.relaxation_rate`).
 Outputs y, z, theta, y', z' every `sample` seconds of the lane's own clock from the apex, the next apex.
 
 Two paths, one result: numba's compilation of the same laws (`physics.compiled`, each lane stepped on its
@@ -119,7 +120,8 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
     compliant = c.ground_stiffness > 0
     lagged = c.torque_lag > 0
     lag = np.where(lagged, c.torque_lag, 1.0)
-    S = np.zeros((8, n))            # y, z, ydot, zdot, depth, applied torque (lag state), toe y, hysteresis
+    S = np.zeros((9, n))            # y, z, ydot, zdot, depth, applied torque (lag state), toe y, hysteresis,
+    #                                 the relaxing force
     S[6] = np.nan
     S[1] = apex_height
     S[2] = forward_speed
@@ -144,7 +146,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
         applied, target = torque(tl, s)
         return laws.stance_forces(c, s[0], s[1], s[2], s[3], s[4], s[6], applied, command=command(tl),
                                   theta_td=theta_at_td, since_touchdown=tl - t_td, compliant=compliant,
-                                  hysteresis=s[7]), target
+                                  hysteresis=s[7], relaxation=s[8]), target
 
     def rhs(tl, s, md):
         out = np.zeros_like(s)
@@ -159,6 +161,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
             out[5] = np.where(st & lagged, (target - s[5]) / lag, 0.0)
             out[6] = np.where(st, f.toe_rate, 0.0)
             out[7] = np.where(st, f.hysteresis_rate, 0.0)
+            out[8] = np.where(st, f.relaxation_rate, 0.0)
         else:
             out[2], out[3] = fy, fz
         out[:, md == DEAD] = 0.0
@@ -224,6 +227,7 @@ def simulate_lanes(c: laws.Coefficients, apex_height, forward_speed, theta_td, t
                         S1[4, td] = 0.0
                         S1[5, td] = 0.0
                         S1[7, td] = 0.0
+                        S1[8, td] = 0.0
                         newmode[td] = STANCE
                     lo = ev & (mode == STANCE)
                     if lo.any():

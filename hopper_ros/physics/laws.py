@@ -101,6 +101,9 @@ class Coefficients:
     leg_friction: object = 0.0              # F_c [N]: - F_c tanh(rho'/v_s)
     leg_hysteresis: object = 0.0            # F_h [N]: + F_h q, q a Bouc-Wen element's state (`hysteresis_rate`)
     leg_hysteresis_yield: object = 0.002    # x_y [m]: the compression over which q turns after a reversal
+    leg_relaxing_stiffness: object = 0.0    # k_r [N/m]: + F_r, a spring in series with a damper (`relaxation_rate`) ...
+    leg_relaxation_time: object = 0.03      # tau_r [s]  ... that lets F_r relax in this time, ...
+    leg_relaxation_curvature: object = 0.0  # 1/L [1/m]  ... an air spring's stiffening (0: a linear spring)
     ground_stiffness: object = 0.0          # k_g [N/m], 0 = rigid ground
     ground_damping: object = 250.0          # d_g [N s/m]
     ground_friction: object = math.inf      # mu [1]: the toe slides where |G_y| > mu G_z (inf: it never slips)
@@ -181,7 +184,7 @@ def active(c: Coefficients) -> frozenset:
 # `*_terms` field where any of its coefficients is not 0
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "boom_curvature", "spring_cubic",
          "spring_preload",
-         "quadratic_damping", "leg_friction", "leg_hysteresis", "hip_viscous", "hip_friction", "hip_ripple_sin",
+         "quadratic_damping", "leg_friction", "leg_hysteresis", "leg_relaxing_stiffness", "hip_viscous", "hip_friction", "hip_ripple_sin",
          "hip_ripple_cos",
          "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness", "foot_radius")
 
@@ -280,6 +283,26 @@ def hysteresis_rate(c: Coefficients, q, compression_rate):
         / c.leg_hysteresis_yield
 
 
+AIR_ADIABATIC_INDEX = 1.4    # gamma of air: an air spring compressed faster than it exchanges heat
+
+
+def relaxation_rate(c: Coefficients, relaxing_force, compression, compression_rate):
+    """The rate of the leg's relaxing force F_r (`leg_relaxing_stiffness`: + F_r along the leg): air trapped in the
+    leg's telescope (piston area A, a chamber of length L = V_0 / A at rest), compressed adiabatically and leaking
+    out through an orifice in tau_r (Raibert's hoppers' legs were air springs). With p A = p_a A + F_r, pV^gamma
+    constant but for the leak, and k_r = gamma p_a A / L (the small-signal stiffness gamma p_a A^2 / V_0):
+
+        F_r' = (k_r + gamma F_r / L) x' / (1 - x / L) - F_r / tau_r,   x = rho_0 - rho
+
+    With 1/L = 0 (`leg_relaxation_curvature`) it is a linear spring k_r in series with a damper (a Maxwell element
+    beside the leg's spring: an elastomer's or a polymer spring's creep). Either way stiff (k + k_r) in a compression
+    fast against tau_r, the spring's own k in a slow one, and energy lost between. Reset to 0 at touchdown (relaxed
+    in flight)."""
+    curvature = c.leg_relaxation_curvature
+    return ((c.leg_relaxing_stiffness + AIR_ADIABATIC_INDEX * curvature * relaxing_force) * compression_rate
+            / (1.0 - curvature * compression) - relaxing_force / c.leg_relaxation_time)
+
+
 def hip_losses(c: Coefficients, theta, theta_dot):
     """Friction in the hip joint, -b theta' - f tanh(theta'/w_s), and a ripple periodic in the leg angle
     (a motor's cogging or a gear's eccentricity seen through the gear), a sin(2 pi theta/P) + b cos(2 pi theta/P),
@@ -302,11 +325,12 @@ StanceForces = namedtuple("StanceForces", [
     "depth_rate",    # toe sinking rate into a compliant ground [m/s]
     "toe_rate",      # the toe's forward sliding speed on a ground of finite friction [m/s]
     "ydd", "zdd",
-    "hysteresis_rate"])     # the rate of the leg's hysteresis state (`hysteresis_rate`)
+    "hysteresis_rate",      # the rate of the leg's hysteresis state (`hysteresis_rate`)
+    "relaxation_rate"])     # the rate of the leg's relaxing force (`relaxation_rate`)
 
 
 def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, command=0.0, theta_td=0.0,
-                  since_touchdown=0.0, compliant=None, hysteresis=0.0) -> StanceForces:
+                  since_touchdown=0.0, compliant=None, hysteresis=0.0, relaxation=0.0) -> StanceForces:
     """Stance dynamics (2.9) in Cartesian form about the toe at (toe_y, ground_height - depth).
 
         e_rho = (-sin theta, cos theta),   e_theta = (-cos theta, -sin theta)
@@ -315,7 +339,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
 
     F is `leg_force` plus the discovered along-the-leg terms, tau the applied torque plus `hip_losses` and
     the discovered hip terms, r the horizontal mass ratio of the boom; `hysteresis` the leg's hysteresis state q
-    (`leg_hysteresis`: + F_h q in F). A compliant ground holds the
+    (`leg_hysteresis`: + F_h q in F), `relaxation` the leg's relaxing force F_r (`leg_relaxing_stiffness`: + F_r in
+    F). A compliant ground holds the
     massless toe with k_g depth + d_g depth' = the force's vertical component; depth' enters rho'. On a
     ground of finite friction the toe slides (`toe_slip_rate`); its speed enters rho' the same way.
     `compliant` (per lane) defaults to ground_stiffness > 0.
@@ -366,6 +391,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     spring_only = leg_force(c, rho, approach) + c.damping * approach     # the force's parts without d rho'
     if is_on(c, "leg_hysteresis"):
         spring_only = spring_only + c.leg_hysteresis * hysteresis
+    if is_on(c, "leg_relaxing_stiffness"):
+        spring_only = spring_only + relaxation
     if is_on(c, "leg_terms"):
         leg_context = stance_context(rho, approach, c.rest_length, theta, theta_dot, theta_td, since_touchdown,
                                      tau, command, c.leg_knot)
@@ -397,7 +424,10 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     q_rate = 0.0
     if is_on(c, "leg_hysteresis"):
         q_rate = hysteresis_rate(c, hysteresis, -rho_dot)
-    return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, toe_rate, ydd, zdd, q_rate)
+    r_rate = 0.0
+    if is_on(c, "leg_relaxing_stiffness"):
+        r_rate = relaxation_rate(c, relaxation, c.rest_length - rho, -rho_dot)
+    return StanceForces(sin, cos, rho, rho_dot, force, tau, depth_rate, toe_rate, ydd, zdd, q_rate, r_rate)
 
 
 def voltage_limited(c: Coefficients, torque, theta_dot):
