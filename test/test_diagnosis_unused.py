@@ -1,7 +1,8 @@
 """Laws of what the model does not use (`diagnosis.unused`, issue 28 point 1): hysteresis in the leg force (a Bouc-Wen
 element, `laws.hysteresis_rate`) and the forward position read with an error periodic in the boom's angle
 (`simulate.periodic_y`, its period found by a frequency scan), the leg's swing in flight reacting on the body
-(`swing`), the drive's voltage limiting the hip motor's current against its back-EMF (`backemf`), the flight's
+(`swing`), the drive's voltage limiting the hip motor's current against its back-EMF (`backemf`), air leaking from
+the leg (`relaxation`), the flight's
 position servo released late after touchdown (`servo`), a round toe rolling in stance (`foot`,
 `laws.stance_forces`), the body carried on the boom's sphere (`sphere`, `laws.boom_sphere`). Real diagnoses of short
 recordings (28 strides) of plant C (test/plant_c/, written blind) made with its own generator at sizes and seeds the
@@ -36,6 +37,7 @@ SERVO = (12.0, 0.03)                     # plant C's flight servo K_p [N m/rad],
 FOOT = 0.02                              # plant C's round toe's radius r_f [m]
 SPHERE = 1.3                             # plant C's boom radius R [m] (its pivot at hardware.yaml's 0.115 m)
 PAIR = (0.022, 8.5, 0.5)                 # a round toe r_f [m] and the drive's voltage limit V [V] over R [ohm] at once
+AIR = (5e-4, 6.5e-5, 0.045)              # plant C's air chamber: piston area A [m^2], volume V0 [m^3], leak tau_l [s]
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +57,8 @@ def recordings(tmp_path_factory):
                                       ("back_emf", make("motor_back_emf", V={BACK_EMF[0]}, R={BACK_EMF[1]}), 4104),
                                       ("servo", make("servo_handoff", K_p={SERVO[0]}, t_h={SERVO[1]}), 4106),
                                       ("foot", make("round_foot", r_f={FOOT}), 4105),
-                                      ("sphere", make("boom_centripetal", R={SPHERE}), 4107)):
+                                      ("sphere", make("boom_centripetal", R={SPHERE}), 4107),
+                                      ("air", make("air_chamber", A={AIR[0]}, V0={AIR[1]}, tau_l={AIR[2]}), 4109)):
             meas, truth, _ = simulate(name, [mechanism.id], seed, strides={STRIDES}, mechanisms=[mechanism])
             write(Path(sys.argv[1]), name, meas, truth)
         pair = [make("round_foot", r_f={PAIR[0]}), make("motor_back_emf", V={PAIR[1]}, R={PAIR[2]})]
@@ -116,6 +119,16 @@ def test_hysteresis_in_the_leg_force_is_named_by_its_bound_not_a_dry_friction(re
                  if e["name"] == "leg_hysteresis")
     assert entry["unit"] == "N" and entry["magnitude"] == pytest.approx(result.chosen[0].magnitude)
     assert "Bouc-Wen" in entry["words"]
+
+
+def test_air_that_leaks_from_the_leg_is_named_a_relaxing_force_not_a_preload_or_a_stiffer_spring(recordings):
+    """Plant C's air chamber at a size and leak the suite does not use (L = V0/A = 130 mm, 45 ms: neither on the
+    search's grid): named `leg_relaxation` alone, an air spring that leaks, and explained; before the pattern search
+    a preload stood in beside it (its late pull), before the law discovered terms or a cubic spring. Its size is not
+    asserted: 706 N/m for 546 (+29 %, the chamber found nearly linear; docs/diagnosis_measured.md)."""
+    result = diagnose_file(recordings / "air.csv")
+    assert [r.name for r in result.chosen] == ["leg_relaxation"], result.verdict
+    assert "an air spring that leaks" in result.verdict and "explained" in result.verdict, result.verdict
 
 
 def test_a_reading_periodic_in_the_boom_angle_is_found_by_the_frequency_scan(recordings):

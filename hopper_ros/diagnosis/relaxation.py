@@ -15,9 +15,9 @@ the speed and stores nothing; a hysteresis (`leg_hysteresis`) does not depend on
 After the accepted effects, where they leave the recording not explained (the stage of `unused.find_unused_law`, in
 its round with the library's effects): k_r searched at each relaxation time tau_r of a geometric grid
 (`relaxation_times` from `relaxation_time_min` to `relaxation_time_max`) and each chamber (a linear spring and
-`relaxation_lengths` lengths from `relaxation_length_min` to `relaxation_length_max`), then between the best time's
-neighbours and between the best chamber's; what the held-out trajectories fit best is kept, then guarded and refitted
-like any effect.
+`relaxation_lengths` lengths from `relaxation_length_min` to `relaxation_length_max`), then a pattern search over
+tau_r and 1/L from the grid's best (`relaxation_refinements` steps, halved where none is better); what the held-out
+trajectories fit best is kept, then guarded and refitted like any effect.
 """
 
 from __future__ import annotations
@@ -40,20 +40,27 @@ def times(settings) -> np.ndarray:
 
 def best_relaxation(search, stack, current, settings) -> Candidate:
     """The candidate the held-out trajectories fit best: over `times` x (a linear spring and the chamber lengths),
-    then between the best time's neighbours and between the best length's, at the other's best (k_r, tau_r and L
-    trade against each other over a stance)."""
+    then a pattern search from there (k_r, tau_r and L trade against each other over a stance, so the grid's best
+    point can sit beside a stand-in where the plant's own lies between its points): each of
+    `relaxation_refinements` steps tries the eight neighbours of tau_r and 1/L a step longer, shorter, larger,
+    smaller (the valley of a trade runs across both), moves to the best, and halves the steps where none was better.
+    Both stay within the grid's range: a force that relaxes in many stances is a stiffer spring, the library's."""
     coarse = times(settings)
     lengths = np.geomspace(settings.relaxation_length_min, settings.relaxation_length_max, settings.relaxation_lengths)
     curvatures = np.concatenate([[0.0], 1.0 / lengths[::-1]])
     best = best_candidate(search, stack, [relaxation_candidate(t, b) for t in coarse for b in curvatures], current)
-    k = int(np.argmin(np.abs(coarse - best.discovery.time)))
-    j = int(np.argmin(np.abs(curvatures - best.discovery.curvature)))
-    fine = np.geomspace(coarse[max(k - 1, 0)], coarse[min(k + 1, len(coarse) - 1)], settings.relaxation_times + 2)
-    near = [relaxation_candidate(t, best.discovery.curvature) for t in fine[1:-1] if not np.isclose(t, coarse[k])]
-    low, high = curvatures[max(j - 1, 0)], curvatures[min(j + 1, len(curvatures) - 1)]
-    near += [relaxation_candidate(best.discovery.time, b) for b in np.linspace(low, high, 5)[1:-1]
-             if not np.isclose(b, best.discovery.curvature)]
-    return best_candidate(search, stack, [best] + near, current)
+    time_step = float(np.sqrt(coarse[1] / coarse[0])) if len(coarse) > 1 else 2.0
+    curvature_step, curvature_max = 0.5 / settings.relaxation_length_max, 1.0 / settings.relaxation_length_min
+    for _ in range(settings.relaxation_refinements):
+        t, b = best.discovery.time, best.discovery.curvature
+        trials = {(min(max(t * f, coarse[0]), coarse[-1]), min(max(b + d * curvature_step, 0.0), curvature_max))
+                  for f in (1.0 / time_step, 1.0, time_step) for d in (-1.0, 0.0, 1.0)} - {(t, b)}
+        moved = best_candidate(search, stack, [best] + [relaxation_candidate(*trial) for trial in sorted(trials)],
+                               current)
+        if (moved.discovery.time, moved.discovery.curvature) == (t, b):
+            time_step, curvature_step = float(np.sqrt(time_step)), 0.5 * curvature_step
+        best = moved
+    return best
 
 
 class Relaxation:

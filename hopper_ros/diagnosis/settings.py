@@ -62,6 +62,7 @@ class Settings:
     relaxation_lengths: int = 3      # air chamber lengths at rest of the relaxing force tried (geometric) ...
     relaxation_length_min: float = 0.05    # [m] ... from this ...
     relaxation_length_max: float = 0.2     # [m] ... to this
+    relaxation_refinements: int = 4  # ... then steps of a pattern search over the time and the chamber from the best
     winding_resistances: int = 6     # winding resistances of the hip motor's voltage limit tried (geometric) ...
     winding_resistance_min: float = 0.1    # [ohm] ... from this ...
     winding_resistance_max: float = 2.0    # [ohm] ... to this
@@ -93,7 +94,7 @@ LIMITS = {
     "relaxation_times": {"ge": 2}, "relaxation_time_min": {"gt": 0, "unit": "s"},
     "relaxation_time_max": {"gt": 0, "unit": "s"},
     "relaxation_lengths": _COUNT, "relaxation_length_min": {"gt": 0, "unit": "m"},
-    "relaxation_length_max": {"gt": 0, "unit": "m"},
+    "relaxation_length_max": {"gt": 0, "unit": "m"}, "relaxation_refinements": {"ge": 0},
     "winding_resistances": _COUNT, "winding_resistance_min": {"gt": 0, "unit": "ohm"},
     "winding_resistance_max": {"gt": 0, "unit": "ohm"}, "servo_releases": _COUNT,
     "servo_release_min": {"gt": 0, "unit": "s"}, "servo_release_max": {"gt": 0, "unit": "s"},
