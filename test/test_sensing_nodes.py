@@ -170,10 +170,12 @@ def run_with_sim_robot(rclpy_session, hopper_cli, tmp_path, mode: str, duration:
         assert sim.wait() == 0
         listener.freezes = int(sim.wait_for_line(r"done, real-time factor [0-9.]+, (\d+) freezes").group(1))
 
-        def all_reported():          # every packet through the bridge and the estimator (diagnostics)
+        def all_reported():          # every packet through the bridge, the estimator and the detector (diagnostics;
             bridge, estimator = listener.diagnostics("/encoder_bridge"), listener.diagnostics("/state_estimator")
-            return (bridge is not None and counters_of(bridge)["packets_received"] == packets
-                    and estimator is not None and counters_of(estimator)["measurements"] == packets)
+            detector = listener.diagnostics("/event_detector")  # without the detector's, its last report once
+            return (bridge is not None and counters_of(bridge)["packets_received"] == packets  # had 7999 of 8000
+                    and estimator is not None and counters_of(estimator)["measurements"] == packets
+                    and detector is not None and counters_of(detector)["samples"] >= packets)
 
         assert spin_until(listener.executor, all_reported), [
             (d.name, counters_of(d)) for d in got_reports(listener)]
