@@ -90,7 +90,8 @@ def test_the_relaxing_leg_force_is_an_air_spring_that_leaks_and_a_maxwell_elemen
     1/L = 0 a compression at a constant rate v gives the Maxwell element's k_r v tau_r (1 - exp(-t / tau_r))."""
     area, length, p_a = 4e-4, 0.08, 101325.0
     stiffness = laws.AIR_ADIABATIC_INDEX * p_a * area / length
-    c = laws.Coefficients(leg_relaxing_stiffness=stiffness, leg_relaxation_time=1e9, leg_relaxation_curvature=1 / length)
+    c = laws.Coefficients(leg_relaxing_stiffness=stiffness, leg_relaxation_time=1e9,
+                          leg_relaxation_curvature=1 / length)
     force, x, dx = 0.0, 0.0, 1e-6
     while x < 0.03 - 1e-12:                                 # 30 mm, RK2 in the compression
         half = force + 0.5 * dx * laws.relaxation_rate(c, force, x, 1.0)

@@ -49,7 +49,7 @@ def best_relaxation(search, stack, current, settings) -> Candidate:
     lengths = np.geomspace(settings.relaxation_length_min, settings.relaxation_length_max, settings.relaxation_lengths)
     curvatures = np.concatenate([[0.0], 1.0 / lengths[::-1]])
     best = best_candidate(search, stack, [relaxation_candidate(t, b) for t in coarse for b in curvatures], current)
-    time_step = float(np.sqrt(coarse[1] / coarse[0])) if len(coarse) > 1 else 2.0
+    time_step = float(np.sqrt(coarse[1] / coarse[0]))      # relaxation_times >= 2 (settings.LIMITS)
     curvature_step, curvature_max = 0.5 / settings.relaxation_length_max, 1.0 / settings.relaxation_length_min
     for _ in range(settings.relaxation_refinements):
         t, b = best.discovery.time, best.discovery.curvature

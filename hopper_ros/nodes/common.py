@@ -17,8 +17,8 @@ fraction of the CPU per message: measured on the demo graph at 1 kHz, 150 % of a
 instead of 190 %, the event detector and the controller at 13 % instead of 30 %. It has no guard
 conditions, so a stop signal is seen within `_EVENTS_SPIN_PERIOD`. SIGINT and SIGTERM both end the spin (unless the parent process had
 set them to be ignored), and so does a node setting its attribute `finished` (its work is done;
-seen at the next wake-up of the executor; with `failed` set too, the status is 1); the node is destroyed, rclpy shut down (a teardown that hangs is cut short after
-nodes/shutdown_guard.SHUTDOWN_GRACE) and 0 returned. A node that cannot start (bad configuration) makes it return 3, one whose callback raises
+seen at the next wake-up of the executor; with `failed` set too, the status is 1); the node is destroyed, rclpy
+shut down (a teardown that hangs is cut short after nodes/shutdown_guard.SHUTDOWN_GRACE) and 0 returned. A node that cannot start (bad configuration) makes it return 3, one whose callback raises
 1 (cli/exit_codes.py).
 """
 
@@ -219,8 +219,8 @@ def run_node(node_factory: Callable[[], "rclpy.node.Node"], args: Sequence[str] 
         if pauses in gc.callbacks:
             gc.callbacks.remove(pauses)
         name = node.get_name() if node is not None else "node"
-        with ShutdownGuard(name, "the node has stopped", status):   # a hung DDS teardown cannot
-            if executor is not None:                                         # keep the process running
+        with ShutdownGuard(name, "the node has stopped", status):   # a hung DDS teardown cannot keep it running
+            if executor is not None:
                 executor.shutdown(timeout_sec=1.0)
             for each in reversed(nodes):
                 each.destroy_node()

@@ -12,8 +12,8 @@ model integrate the same laws their own way.
 
 State per lane: y, z, y', z', toe depth (compliant ground), applied torque (first-order actuator lag),
 the toe's forward position (it slides on a ground of finite friction; a round toe's centre, which rolls:
-`laws.stance_forces`), the leg's hysteresis state (reset at touchdown, `laws.hysteresis_rate`) and its relaxing force (reset at
-touchdown, `laws.relaxation_rate`).
+`laws.stance_forces`), the leg's hysteresis state (reset at touchdown, `laws.hysteresis_rate`) and its relaxing
+force (reset at touchdown, `laws.relaxation_rate`).
 Outputs y, z, theta, y', z' every `sample` seconds of the lane's own clock from the apex, the next apex.
 
 Two paths, one result: numba's compilation of the same laws (`physics.compiled`, each lane stepped on its

@@ -184,8 +184,8 @@ def active(c: Coefficients) -> frozenset:
 # `*_terms` field where any of its coefficients is not 0
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "boom_curvature", "spring_cubic",
          "spring_preload",
-         "quadratic_damping", "leg_friction", "leg_hysteresis", "leg_relaxing_stiffness", "hip_viscous", "hip_friction", "hip_ripple_sin",
-         "hip_ripple_cos",
+         "quadratic_damping", "leg_friction", "leg_hysteresis", "leg_relaxing_stiffness", "hip_viscous", "hip_friction",
+         "hip_ripple_sin", "hip_ripple_cos",
          "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness", "foot_radius")
 
 
