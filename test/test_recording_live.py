@@ -118,7 +118,9 @@ def test_sigkill_loses_at_most_the_last_chunk(rclpy_session, hopper_cli, tmp_pat
     info = bag_info(tmp_path / "bag")
     assert not info.complete and "interrupted" in " ".join(info.problems)
     sequences = [msg.sequence for _, _, msg in BagReader(tmp_path / "bag").messages()]
-    assert len(sequences) > rate                                         # more than a second survived
+    # more than a second survived (once, in CI, only the match's first message did: what the recorder said is shown)
+    assert len(sequences) > rate, (f"{len(sequences)} message(s) in the bag {sequences[:5]}, {at_kill - start} "
+                                   f"published after the match; the recorder's log: {recorder.stderr[-1500:]!r}")
     assert np.all(np.diff(sequences) == 1)                               # nothing lost inside the bag
     lost = at_kill - 1 - sequences[-1]
     assert lost <= rate * interval * 1.5 + 20, f"{lost} messages lost, a chunk holds about {rate * interval:.0f}"
