@@ -3,7 +3,7 @@
 rclpy's `Node.destroy_node` and `rclpy.try_shutdown` end in the DDS participant's teardown, which was
 seen to hang under load (CI, twice: a recorder after its bag was closed, the motor driver after the
 drive had confirmed it was disabled, both inside rclpy's native `destroy_when_not_in_use`). The work
-that matters is done before it: `ShutdownGuard` gives the teardown `grace` seconds, then says so on
+that matters is done before it: `ShutdownGuard` gives the teardown SHUTDOWN_GRACE seconds, then says so on
 stderr with every thread's stack and ends the process with the status it was going to return.
 """
 
@@ -19,12 +19,12 @@ SHUTDOWN_GRACE = 10.0   # [s] the ROS teardown's time once a process's own work 
 
 class ShutdownGuard:
     """`with ShutdownGuard(who, done, status): <ROS teardown>`: if the block has not ended after
-    `grace` seconds, print "<who>: the ROS shutdown has not ended in N s (<done>); ...", the stacks,
+    SHUTDOWN_GRACE seconds, print "<who>: the ROS shutdown has not ended in N s (<done>); ...", the stacks,
     and `os._exit(status)`."""
 
-    def __init__(self, who: str, done: str, status: int, grace: float | None = None) -> None:
+    def __init__(self, who: str, done: str, status: int) -> None:
         self.who, self.done, self.status = who, done, status
-        self.grace = SHUTDOWN_GRACE if grace is None else grace
+        self.grace = SHUTDOWN_GRACE      # read now: a test sets the module's value before the process starts
         self._timer: threading.Timer | None = None
 
     def __enter__(self) -> "ShutdownGuard":
