@@ -50,6 +50,7 @@ class ExtractionSettings:
     touchdown_samples: int = 5        # leg angle samples before touchdown for theta_td
     zero_torque: float = 0.05         # [N m] |tau_0| below this is no torque
     torque_skip: float = 0.002        # [s] stance torque samples skipped after touchdown (drive lag)
+    late_torque: float = 0.01         # [s] a stance torque zero at touchdown starting within this: begun late
     max_ramp_duration: float = 10.0   # [s] a flat (constant) torque gets this t_f
     max_stance_time: float = 0.5      # [s]
     min_forward_speed: float = 0.05   # [m/s] the robot must run forward
@@ -316,17 +317,29 @@ def _command_for(rec: Recording, flight_start: float, touchdown: float):
 
 
 def ramp_from_torque(since: np.ndarray, tau: np.ndarray, stance_time: float, s: ExtractionSettings):
-    """(tau_0, t_f) of the ramp -tau_0 (1 - t/t_f) (2.32) through the stance torque samples."""
-    # away from both ends: the drive lags at touchdown, and the detected lift-off is late, so
+    """(tau_0, t_f) of the ramp -tau_0 (1 - t/t_f) (2.32) through the stance torque samples, `since` the
+    touchdown as the recording's leg length gives it. A torque still zero there that starts within
+    `late_torque` began late (the ground lower than the model's, the height read low): its ramp is read from
+    its own start, as the leg met it (read from that touchdown it was no ramp at all once it started after
+    the skipped samples, and a larger one before)."""
+    on = (np.abs(tau) > s.zero_torque) & (since >= 0.0)
+    if not np.any(on):
+        return 0.0, stance_time
+    first, start = int(np.argmax(on)), 0.0
+    if first > 0 and since[first - 1] >= 0.0:      # zero at the touchdown: from between its last zero and first
+        start = 0.5 * (since[first - 1] + since[first])
+        if start > s.late_torque:
+            return 0.0, stance_time
+    # away from both ends: the drive lags at the ramp's start, and the detected lift-off is late, so
     # the last stance samples may already hold the flight's leg regulator torque
-    use = (since >= s.torque_skip) & (since <= stance_time - s.edge_guard)
+    use = (since >= start + s.torque_skip) & (since <= stance_time - s.edge_guard)
     if use.sum() < 3:
         return 0.0, stance_time
-    t_use, tau_use = since[use], tau[use]
+    t_use, tau_use = since[use] - start, tau[use]
     active = np.abs(tau_use) > s.zero_torque
     if active.sum() < 3 or not active[0]:
         return 0.0, stance_time
-    # the ramp is the active run from touchdown on; once it ends the torque stays zero
+    # the ramp is the active run from its start on; once it ends the torque stays zero
     inactive = np.flatnonzero(~active)
     end = int(inactive[0]) if inactive.size else len(active)
     if end < 3:
