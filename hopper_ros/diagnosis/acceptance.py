@@ -31,9 +31,17 @@ def plausible(r: Scored) -> bool:
     return c.plausible[0] <= abs(r.magnitude - c.off) <= c.plausible[1]
 
 
+def resolved(r: Scored) -> bool:
+    """Not refitted past the range this recording resolves on the side where the candidate changes nothing (a
+    torque limit is searched between 0.3 and 1 x the largest commanded torque: above them all it clips nothing)."""
+    c = r.candidate
+    low, high = sorted((c.low, c.high))
+    return not ((c.origin < low and r.value < low) or (c.origin > high and r.value > high))
+
+
 def real(r: Scored) -> bool:
-    """Physics, discovered terms, or a sensor fault that is `plausible`."""
-    return r.candidate.kind != "sensor" or plausible(r)
+    """Physics or discovered terms that are `resolved`, or a sensor fault that is `plausible`."""
+    return plausible(r) if r.candidate.kind == "sensor" else resolved(r)
 
 
 def not_worse(r: Scored, best: Scored, settings: Settings) -> bool:
