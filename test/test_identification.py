@@ -11,7 +11,7 @@ import pytest
 
 from hopper_ros.identification.cost import stride_errors
 from hopper_ros.identification.settings import FITTABLE, load_settings
-from hopper_ros.identification.strides import extract_strides
+from hopper_ros.identification.strides import ExtractionSettings, extract_strides, ramp_from_torque
 from hopper_ros.physics.params import ModelParams
 from hopper_ros.recording.recordings import Recording, RecordingError, load_bag, load_csv, write_csv
 
@@ -230,3 +230,26 @@ def test_identify_and_report_commands(noisy_collection, hopper_cli, tmp_path):
         assert (tmp_path / "report" / png).stat().st_size > 10_000
     refused = hopper_cli("identify", str(tmp_path / "missing.csv"))
     assert refused.wait() == 3 and "no such file" in refused.stderr
+
+
+@pytest.mark.parametrize("late", [0.0, 0.0006, 0.0013, 0.0021, 0.0047])
+def test_a_stance_torque_that_starts_after_the_measured_touchdown_is_read_from_its_own_start(late):
+    """The ramp -tau_0 (1 - t/t_f) (2.32) logged from where the leg met the ground, `late` after the touchdown the
+    recording's leg length gives (a height read 1.7 % low puts it about 2 ms before): (tau_0, t_f) as the leg met
+    them. Read from the measured touchdown, a torque still zero 2 ms after it was no ramp at all, and one starting
+    within 2 ms a ramp extrapolated back to the touchdown (up to 3 % more impulse: plant B's height scale of
+    -1.7 % was then not found)."""
+    tau_0, t_f, stance = 6.3, 0.062, 0.072
+    since = np.arange(0.0, stance, 1e-3) + 0.0004          # samples from just after the measured touchdown
+    on = since >= late
+    tau = np.where(on & (since - late < t_f), -tau_0 * (1.0 - (since - late) / t_f), 0.0)
+    found_tau, found_t_f = ramp_from_torque(since, tau, stance, ExtractionSettings())
+    assert found_tau == pytest.approx(tau_0, rel=0.01) and found_t_f == pytest.approx(t_f, abs=6e-4), \
+        (found_tau, found_t_f)
+
+
+def test_a_stance_torque_that_starts_long_after_touchdown_is_no_ramp():
+    """A torque that first appears later than `late_torque` into the stance is not (2.32)'s ramp begun late."""
+    since = np.arange(0.0, 0.072, 1e-3)
+    tau = np.where(since >= 0.03, -3.0, 0.0)
+    assert ramp_from_torque(since, tau, 0.072, ExtractionSettings())[0] == 0.0
