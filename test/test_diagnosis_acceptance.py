@@ -72,11 +72,24 @@ def test_a_sensor_fault_must_be_a_real_sensors():
     assert not acceptance.plausible(small) and not acceptance.real(small) and not small.significant
     assert any("not a fault a real sensor has" in line for line in small.rejected)
     assert acceptance.plausible(real) and acceptance.real(real) and real.significant
-    # physics and discovered terms are real whatever their size
+    # physics and discovered terms are real whatever their size, where the recording resolves it
     assert acceptance.real(scored("torque_gain", magnitude=123.0))
     # a sensor that leaves the next apex as it was must explain most of the residual
     partial = scored("z_delay", share=0.7, magnitude=0.004, errors=MODEL)
     assert not partial.significant and any("explains only" in line for line in partial.rejected)
+
+
+def test_a_torque_limit_refitted_above_every_command_is_not_real():
+    """A torque limit is searched where the commanded torques resolve it (0.3-1 x the largest); refitted beside
+    other effects to 26 N m against commands up to 8.3 N m it clips nothing (plant B: said as a false verdict)."""
+    c = library_candidate(library.get("torque_saturation"), COEFFICIENTS, {"command": 8.3})
+
+    def limit(tau_max):
+        value = c.origin if tau_max is None else 1.0 / tau_max         # searched as 1/tau_max
+        return Scored(c, Fit(value, [], [], [], np.zeros(0)), c.physical(value), BASE_SSE, MODEL)
+
+    assert acceptance.real(limit(6.0)) and acceptance.real(limit(8.3)) and acceptance.real(limit(3.0))
+    assert not acceptance.real(limit(26.27)) and not acceptance.real(limit(None))
 
 
 def test_a_sensor_fault_beats_physics_only_by_its_margin():
