@@ -407,6 +407,7 @@ class Extraction(Section):
     touchdown_samples: int = Field(None, ge=1)
     zero_torque: float = unit("N m", None, ge=0)
     torque_skip: float = unit("s", None, ge=0)
+    late_torque: float = unit("s", None, ge=0)
     max_ramp_duration: float = unit("s", None, gt=0)
     max_stance_time: float = unit("s", None, gt=0)
     min_forward_speed: float = unit("m/s", None, ge=0)
