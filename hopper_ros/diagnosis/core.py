@@ -62,7 +62,6 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
         chosen = restarts(search, excited, chosen, log, model)
     progress.say("the accepted effects' secondary parameters and look-alikes")
     fit_secondary(search, chosen)
-    chosen = [r for r in chosen if acceptance.real(r)]     # (plant B: a torque limit refitted above every command)
     discovered_look_alikes(search, chosen, log.discoveries)
     state = _accepted(search, chosen, log, model, base_sim["series"], moves)
     drifts = find_drift(data, state.current, settings)[:1]
