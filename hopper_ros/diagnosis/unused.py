@@ -83,8 +83,8 @@ def refitted(search: Search, chosen: list[Scored], current: Reference) -> Refere
 def find_unused_law(search: Search, chosen: list[Scored], current: Reference, sets, located: set) -> Scored | None:
     """The boom angle's periodic reading error (where its scan stands on held-out strides), the leg's hysteresis, its
     relaxing force, the leg's swing in flight, the drive's voltage limit, the servo released late, a round toe rolling
-    in stance or the boom's sphere, where it wins a round beside the accepted effects against the library's (each judged against the
-    accepted effects `refitted` on this search); None otherwise."""
+    in stance or the boom's sphere, where it wins a round beside the accepted effects against the library's (each
+    judged against the accepted effects `refitted` on this search); None otherwise."""
     settings = search.settings
     stack = search.stack(chosen)
     current = refitted(search, chosen, current)

@@ -15,11 +15,12 @@ every thread; a pause over GC_PAUSE_WARNING is logged) and spins it on rclpy's
 EventsExecutor (HOPPER_EXECUTOR=single: the SingleThreadedExecutor). The events executor costs a
 fraction of the CPU per message: measured on the demo graph at 1 kHz, 150 % of a core in all
 instead of 190 %, the event detector and the controller at 13 % instead of 30 %. It has no guard
-conditions, so a stop signal is seen within `_EVENTS_SPIN_PERIOD`. SIGINT and SIGTERM both end the spin (unless the parent process had
-set them to be ignored), and so does a node setting its attribute `finished` (its work is done;
-seen at the next wake-up of the executor; with `failed` set too, the status is 1); the node is destroyed, rclpy
-shut down (a teardown that hangs is cut short after nodes/shutdown_guard.SHUTDOWN_GRACE) and 0 returned. A node that cannot start (bad configuration) makes it return 3, one whose callback raises
-1 (cli/exit_codes.py).
+conditions, so a stop signal is seen within `_EVENTS_SPIN_PERIOD`. SIGINT and SIGTERM both end the spin
+(unless the parent process had set them to be ignored), and so does a node setting its attribute `finished`
+(its work is done; seen at the next wake-up of the executor; with `failed` set too, the status is 1); the node
+is destroyed, rclpy shut down (a teardown that hangs is cut short after nodes/shutdown_guard.SHUTDOWN_GRACE)
+and 0 returned. A node that cannot start (bad configuration) makes it return 3, one whose callback raises 1
+(cli/exit_codes.py).
 """
 
 from __future__ import annotations
