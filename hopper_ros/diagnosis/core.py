@@ -22,6 +22,7 @@ from hopper_ros.physics.params import ModelParams
 from hopper_ros.recording.recordings import Recording
 
 from . import acceptance
+from .alternatives import told_apart
 from .angle import find_angle_law
 from .candidates import candidate_sites
 from .data import PHASES, StrideData, own_ramps, prepare
@@ -63,6 +64,7 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     progress.say("the accepted effects' secondary parameters and look-alikes")
     fit_secondary(search, chosen)
     discovered_look_alikes(search, chosen, log.discoveries)
+    chosen = told_apart(search, chosen)       # a library effect that is the look-alike of a law of the same part
     state = _accepted(search, chosen, log, model, base_sim["series"], moves)
     drifts = find_drift(data, state.current, settings)[:1]
     after = drifts[0].after if drifts else state.after     # the model with the drift

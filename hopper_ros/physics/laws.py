@@ -96,6 +96,7 @@ class Coefficients:
     ground_height: object = 0.0             # [m] where the toe meets the ground, above the model's z = 0
     # stance, along the leg
     spring_cubic: object = 0.0              # k_3 [N/m^3]: + k_3 (rho_0 - rho)^3
+    spring_quadratic: object = 0.0          # k_2 [N/m^2]: + k_2 (rho_0 - rho)^2 (< 0: a spring that softens)
     spring_preload: object = 0.0            # F_p [N]: + F_p (a spring preloaded against the leg's stop)
     quadratic_damping: object = 0.0         # d_2 [N s^2/m^2]: - d_2 |rho'| rho'
     leg_friction: object = 0.0              # F_c [N]: - F_c tanh(rho'/v_s)
@@ -114,6 +115,8 @@ class Coefficients:
     torque_delay: object = 0.0              # [s] command -> torque
     torque_lag: object = 0.0                # [s] first-order time constant
     torque_limit: object = math.inf         # [N m] |tau| <= limit
+    torque_dead_band: object = 0.0          # [N m] the first delta of every command is lost (a gearbox's static
+    #                                         friction seen through the command: small commands give no torque)
     hip_viscous: object = 0.0               # [N m s/rad] - b theta'
     hip_friction: object = 0.0              # [N m] - f tanh(theta'/w_s)
     rotor_inertia: object = 0.0             # J [kg m^2] about the hip: the motor's rotor through the gear (J_r N^2)
@@ -183,10 +186,11 @@ def active(c: Coefficients) -> frozenset:
 # the coefficients whose law is skipped where they are 0 (`is_on`); ground_friction is on where finite, and a
 # `*_terms` field where any of its coefficients is not 0
 GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_gravity", "boom_curvature", "spring_cubic",
+         "spring_quadratic",
          "spring_preload",
          "quadratic_damping", "leg_friction", "leg_hysteresis", "leg_relaxing_stiffness", "hip_viscous", "hip_friction",
          "hip_ripple_sin", "hip_ripple_cos",
-         "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness", "foot_radius")
+         "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness", "foot_radius", "torque_dead_band")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -257,11 +261,14 @@ def stance_context(rho, rho_dot, rest_length, theta, theta_dot, theta_td, since_
 
 def leg_force(c: Coefficients, rho, rho_dot):
     """Spring-damper force along the leg, k (rho_0 - rho) - d rho' (2.9), zero at lift-off (2.28), plus the
-    along-the-leg effects other than the discovered terms (cubic spring, preload, quadratic damping, dry friction)."""
+    along-the-leg effects other than the discovered terms (quadratic and cubic spring, preload, quadratic damping, dry
+    friction)."""
     x = c.rest_length - rho
     force = c.stiffness * x - c.damping * rho_dot
     if is_on(c, "spring_cubic"):
         force = force + c.spring_cubic * x ** 3
+    if is_on(c, "spring_quadratic"):
+        force = force + c.spring_quadratic * x ** 2
     if is_on(c, "spring_preload"):
         force = force + c.spring_preload
     if is_on(c, "quadratic_damping"):
@@ -505,10 +512,12 @@ def toe_slip_rate(c: Coefficients, stuck_force, across, sin, cos):
 
 
 def actuator_torque(c: Coefficients, command):
-    """Torque the hip delivers for a commanded torque (before any lag): gain, offset, saturation.
+    """Torque the hip delivers for a commanded torque (before any lag): dead band, gain, offset, saturation.
 
     The delay and the first-order lag act in time (the integrators: `torque_delay`, `torque_lag`).
     """
+    if is_on(c, "torque_dead_band"):
+        command = np.sign(command) * np.maximum(np.abs(command) - c.torque_dead_band, 0.0)
     return clip(c.torque_gain * command + c.torque_offset, -c.torque_limit, c.torque_limit)
 
 
