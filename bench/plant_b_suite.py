@@ -31,7 +31,8 @@ MATCH = {
     # an unsprung toe stopped at touchdown: v_along+ = v_along- m_b / (m_b + m_u)
     "unsprung_toe_impact": ({"touchdown_loss_along": lambda m: m / (BODY_MASS + m)}, {"touchdown_along"}),
     "undulating_floor": ({"ground_height": None}, {"touchdown_along", "touchdown_timing"}),
-    "backemf_torque_speed": ({"hip_viscous_friction": None, "torque_gain": None}, {"stance_hip"}),
+    "backemf_torque_speed": ({"torque_speed_slope": lambda m: 1.0 / m, "hip_viscous_friction": None,
+                              "torque_gain": None}, {"stance_hip"}),
     "torque_deadband": ({"torque_dead_band": lambda m: m, "torque_offset": None, "hip_dry_friction": None,
                          "torque_gain": None}, {"stance_hip"}),
     "harder_liftoff_collision": ({"liftoff_collision": lambda m: TOE_MASS + m}, {"liftoff_along", "liftoff_across"}),

@@ -1,8 +1,9 @@
 """Laws of the same part told apart from an accepted library look-alike (issue 28, point 1: the size of the commanded
 torque; hopper_ros/diagnosis/alternatives.py): a torque dead band of plant B (test/plant_b/, written blind) with a
 size and seed of its own (not its suite's case) is named as a dead band, where the library's nearest law is a dry
-friction of the hip; the independent plant's real dry hip friction keeps its name. The laws themselves: a command
-inside the dead band gives no torque, and the spring's quadratic term."""
+friction of the hip; the independent plant's real dry hip friction and torque gain keep their names; a softening
+spring and a torque-speed line of plant B (diagnoses of minutes: `long`). The laws themselves: a command inside
+the dead band gives no torque, the torque-speed line, the spring's quadratic term."""
 
 import json
 import subprocess
@@ -45,6 +46,11 @@ def test_a_command_inside_the_dead_band_gives_no_torque_and_a_larger_one_loses_t
     assert laws.actuator_torque(laws.Coefficients(), 0.25) == pytest.approx(0.25)      # off: the command itself
 
 
+def test_the_torque_falls_linearly_with_the_sweep_to_none_at_the_no_load_sweep():
+    c = laws.Coefficients(torque_speed_slope=0.01)
+    assert laws.speed_derated(c, 5.0, np.array([0.0, -20.0, 50.0, 150.0])) == pytest.approx([5.0, 4.0, 2.5, 0.0])
+
+
 def test_the_spring_quadratic_term_adds_k2_times_the_compression_squared():
     plain = laws.Coefficients()
     softening = plain.replace(spring_quadratic=-9000.0)
@@ -67,13 +73,35 @@ def test_a_torque_dead_band_is_named_as_one_not_as_the_hips_dry_friction(dead_ba
 
 
 @pytest.mark.compute
-def test_a_real_dry_friction_of_the_hip_keeps_its_name(tmp_path):
-    """The independent plant's Coulomb friction in the hip gearbox (0.4 N m): the dead band is tried in its place and
-    does not win."""
-    write_suite(tmp_path, ("hip_friction_coulomb",))
-    result = diagnose_file(tmp_path / "hip_friction_coulomb.csv")
+@pytest.mark.parametrize("recording, effect, law", [("hip_friction_coulomb", "hip_dry_friction", "torque_dead_band"),
+                                                    ("actuator_gain", "torque_gain", "torque_speed_slope")])
+def test_a_real_library_effect_keeps_its_name(tmp_path, recording, effect, law):
+    """The independent plant's Coulomb friction in the hip gearbox (0.4 N m), its torque gain (0.85): the law of the
+    same part is tried in its place and does not win."""
+    write_suite(tmp_path, (recording,))
+    result = diagnose_file(tmp_path / f"{recording}.csv")
     names = [r.name for r in result.chosen]
-    assert "hip_dry_friction" in names and "torque_dead_band" not in names, result.verdict
+    assert effect in names and law not in names, result.verdict
+
+
+@pytest.mark.compute
+@pytest.mark.long     # a diagnosis of a minute and more; `make bench` diagnoses plant B's s08
+def test_a_torque_that_falls_with_the_sweep_is_a_torque_speed_line_not_a_gain(tmp_path):
+    """Plant B's voltage-limited motor, tau = tau_cmd max(0, 1 - |theta'|/w0), with a size and seed of its own: a
+    lower gain fits most of it; the torque-speed line replaces it, with the plant's no-load sweep within 20 %."""
+    no_load = 110.0      # [rad/s] plant B's w0 (its suite has 137)
+    subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
+        import sys
+        from plant_b import effects as E
+        from plant_b.suite import simulate, write
+        effs = [E.BackEMF({no_load})]
+        out, strides, summary, _ = simulate("speed", effs, {SEED + 2})
+        write(sys.argv[1], "speed", effs, {SEED + 2}, out, strides, summary)
+        """), str(tmp_path)], check=True, capture_output=True, timeout=300, cwd=HERE)
+    result = diagnose_file(tmp_path / "speed.csv")
+    assert [r.name for r in result.chosen] == ["torque_speed_slope"], result.verdict
+    assert 1.0 / result.chosen[0].magnitude == pytest.approx(no_load, rel=0.2), result.verdict
+    assert "torque_gain" in [r.name for r in result.chosen[0].ties], result.verdict
 
 
 @pytest.mark.compute

@@ -1,5 +1,5 @@
 """Laws of the same part told apart from an accepted library effect (issue 28, point 1: the size of the commanded
-torque, a dead band against friction; a spring's shape).
+torque, a dead band against friction; point 3: torque x speed; a spring's shape).
 
 An accepted library effect may be the nearest library law of a mechanism the library does not hold. Each accepted
 effect with a law of its part here (`ALTERNATIVES`) is searched again beside the others, against that law in its
@@ -16,6 +16,9 @@ is tried only where its look-alike won.
   command lost, tau = sign(tau_cmd) max(|tau_cmd| - delta, 0) (a gearbox's static friction seen through the
   command). Alike while the stance ramp (2.32) is above delta; the dead band gives nothing once the ramp has
   fallen below delta and after it ends, where dry friction still brakes the sweep until lift-off.
+- `torque_gain` -> `torque_speed_slope`: a fixed share of every command lost, or a share that grows with the leg's
+  sweep, tau = tau_cmd (1 - s |theta'|) (a torque-speed line: a drive that derates with the back-EMF; issue 28
+  point 3's torque x speed). Alike where the sweeps of all stances are alike; told apart by the fast ones.
 - `leg_stiffness` -> `spring_quadratic`: the spring's force k x + k_2 x^2 (x = rho_0 - rho, (2.9)'s spring with a
   term of its square: a spring that softens, k_2 < 0, or stiffens as it compresses, one way only), where a
   stiffness alone is the nearest straight line.
@@ -28,6 +31,7 @@ import copy
 import numpy as np
 
 from . import acceptance
+from .backemf import sweep_bound
 from .candidates import Candidate
 from .records import Scored
 from .search import Search
@@ -35,6 +39,7 @@ from .simulate import Variant
 
 DEAD_BAND = "torque_dead_band"
 QUADRATIC = "spring_quadratic"
+SPEED_SLOPE = "torque_speed_slope"
 DEAD_BAND_SHARE = 0.5          # the dead band searched up to this share of the largest command (above, most strides'
 #                                commands would give nothing)
 QUADRATIC_LENGTH = 0.1         # [m] k_2 searched within +-k / this: at 5 cm of compression, half the spring's force
@@ -74,8 +79,24 @@ def quadratic_spring_candidate(search: Search) -> Candidate:
                      equation="F = k x + k_2 x^2 - d rho'  (2.9), x = rho_0 - rho")
 
 
+def speed_line_candidate(search: Search) -> Candidate:
+    """The torque's fall with the leg's sweep, s [s/rad], searched from none to where the fastest sweep of the
+    recording (`backemf.sweep_bound`) would leave no torque."""
+    def build(variant: Variant, slope: float) -> Variant:
+        return variant.with_changes(coefficients={SPEED_SLOPE: float(slope)})
+
+    return Candidate(SPEED_SLOPE, "physics", "actuator", "stance_hip", "s/rad",
+                     "the hip's torque falls linearly with the leg's sweep, tau = tau_cmd (1 - s |theta'|), none at "
+                     "the no-load sweep 1/s (a torque-speed line: a drive derating with the motor's back-EMF, not a "
+                     "fixed share of every command)", 0.0, 1.0 / sweep_bound(search.data), build, float,
+                     "the leg swept by hand at several speeds against a fixed torque command (a torque-speed line "
+                     "loses more the faster; a gain the same share at any speed)",
+                     equation="tau = tau_cmd (1 - s |theta'|), 0 past 1/s")
+
+
 # accepted library effect -> the law of the same part to tell it from
-ALTERNATIVES = {"hip_dry_friction": dead_band_candidate, "leg_stiffness": quadratic_spring_candidate}
+ALTERNATIVES = {"hip_dry_friction": dead_band_candidate, "torque_gain": speed_line_candidate,
+                "leg_stiffness": quadratic_spring_candidate}
 
 
 def told_apart(search: Search, chosen: list[Scored]) -> list[Scored]:

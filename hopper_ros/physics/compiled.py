@@ -127,7 +127,7 @@ for _law in (laws.ramp_torque, laws.smooth_sign, laws.flight_y_term, laws.flight
              laws.hip_term, laws.jump_term, laws.sum_terms, laws.boom_sphere, laws.flight_acceleration,
              laws.stance_context,
              laws.leg_force, laws.hysteresis_rate, laws.relaxation_rate, laws.hip_losses, laws.voltage_limited,
-             laws.servo_hold,
+             laws.speed_derated, laws.servo_hold,
              laws.rotor_torque,
              laws.stance_forces,
              laws.toe_slip_rate,

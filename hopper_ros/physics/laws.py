@@ -115,6 +115,7 @@ class Coefficients:
     torque_delay: object = 0.0              # [s] command -> torque
     torque_lag: object = 0.0                # [s] first-order time constant
     torque_limit: object = math.inf         # [N m] |tau| <= limit
+    torque_speed_slope: object = 0.0        # [s/rad] the torque falls by this share per rad/s of the leg's sweep
     torque_dead_band: object = 0.0          # [N m] the first delta of every command is lost (a gearbox's static
     #                                         friction seen through the command: small commands give no torque)
     hip_viscous: object = 0.0               # [N m s/rad] - b theta'
@@ -190,7 +191,8 @@ GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_grav
          "spring_preload",
          "quadratic_damping", "leg_friction", "leg_hysteresis", "leg_relaxing_stiffness", "hip_viscous", "hip_friction",
          "hip_ripple_sin", "hip_ripple_cos",
-         "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness", "foot_radius", "torque_dead_band")
+         "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness", "foot_radius", "torque_dead_band",
+         "torque_speed_slope")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -388,6 +390,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
         rho = rho + c.foot_radius
     if is_on(c, "drive_voltage"):
         torque = voltage_limited(c, torque, theta_dot)
+    if is_on(c, "torque_speed_slope"):
+        torque = speed_derated(c, torque, theta_dot)
     tau = torque + hip_losses(c, theta, theta_dot)
     if is_on(c, "servo_stiffness"):
         tau = tau + servo_hold(c, theta, theta_td, since_touchdown)
@@ -450,6 +454,12 @@ def voltage_limited(c: Coefficients, torque, theta_dot):
     electrical = k * k / r * theta_dot
     stall = k * c.drive_voltage / r
     return where(c.drive_voltage > 0.0, clip(torque, -stall - electrical, stall - electrical), torque)
+
+
+def speed_derated(c: Coefficients, torque, theta_dot):
+    """The torque left of a motor whose torque falls linearly with its speed, tau (1 - s |theta'|), none from the
+    no-load sweep 1/s on (a torque-speed line: a drive that derates with the back-EMF, not a fixed clip)."""
+    return torque * np.maximum(1.0 - c.torque_speed_slope * np.abs(theta_dot), 0.0)
 
 
 def servo_hold(c: Coefficients, theta, theta_td, since_touchdown):
