@@ -1,8 +1,9 @@
 """Laws of the same part told apart from an accepted library look-alike (issue 28, point 1: the size of the commanded
 torque; hopper_ros/diagnosis/alternatives.py): a torque dead band of plant B (test/plant_b/, written blind) with a
 size and seed of its own (not its suite's case) is named as a dead band, where the library's nearest law is a dry
-friction of the hip; the independent plant's real dry hip friction and torque gain keep their names; a softening
-spring and a torque-speed line of plant B (diagnoses of minutes: `long`). The laws themselves: a command inside
+friction of the hip, and a torque that falls with the leg's sweep as a torque-speed line, not a gain; the
+independent plant's real dry hip friction and torque gain keep their names; a softening spring of plant B (a
+diagnosis of minutes: `long`). The laws themselves: a command inside
 the dead band gives no torque, the torque-speed line, the spring's quadratic term."""
 
 import json
@@ -85,7 +86,6 @@ def test_a_real_library_effect_keeps_its_name(tmp_path, recording, effect, law):
 
 
 @pytest.mark.compute
-@pytest.mark.long     # a diagnosis of a minute and more; `make bench` diagnoses plant B's s08
 def test_a_torque_that_falls_with_the_sweep_is_a_torque_speed_line_not_a_gain(tmp_path):
     """Plant B's voltage-limited motor, tau = tau_cmd max(0, 1 - |theta'|/w0), with a size and seed of its own: a
     lower gain fits most of it; the torque-speed line replaces it, with the plant's no-load sweep within 20 %."""
