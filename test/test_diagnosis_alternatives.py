@@ -3,8 +3,8 @@ torque; hopper_ros/diagnosis/alternatives.py): a torque dead band of plant B (te
 size and seed of its own (not its suite's case) is named as a dead band, where the library's nearest law is a dry
 friction of the hip, and a torque that falls with the leg's sweep as a torque-speed line, not a gain; the
 independent plant's real dry hip friction and torque gain keep their names; a softening spring of plant B (a
-diagnosis of minutes: `long`). The laws themselves: a command inside
-the dead band gives no torque, the torque-speed line, the spring's quadratic term."""
+diagnosis of minutes: `long`). The laws themselves: a command inside the dead band gives no torque, the
+torque-speed line, the spring's quadratic term."""
 
 import json
 import subprocess
