@@ -26,18 +26,23 @@ DEAD_BAND = 0.35                 # [N m] plant B's tau_db (its suite has 0.27 an
 SEED = 4217
 
 
-@pytest.fixture(scope="module")
-def dead_band(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("dead_band")
+def plant_b_recording(folder: Path, name: str, effect: str, seed: int) -> Path:
+    """A recording of plant B (its own simulate and writer, in a process of its own) with the one effect `effect`
+    (an expression of its effects module, `E`); its CSV's path."""
     subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
         import sys
         from plant_b import effects as E
         from plant_b.suite import simulate, write
-        effs = [E.TorqueDeadband({DEAD_BAND})]
-        out, strides, summary, _ = simulate("dead_band", effs, {SEED})
-        write(sys.argv[1], "dead_band", effs, {SEED}, out, strides, summary)
+        effs = [{effect}]
+        out, strides, summary, _ = simulate("{name}", effs, {seed})
+        write(sys.argv[1], "{name}", effs, {seed}, out, strides, summary)
         """), str(folder)], check=True, capture_output=True, timeout=300, cwd=HERE)
-    path = folder / "dead_band.csv"
+    return folder / f"{name}.csv"
+
+
+@pytest.fixture(scope="module")
+def dead_band(tmp_path_factory):
+    path = plant_b_recording(tmp_path_factory.mktemp("dead_band"), "dead_band", f"E.TorqueDeadband({DEAD_BAND})", SEED)
     return diagnose_file(path, json_path=path.with_suffix(".diagnosis.json")), path
 
 
@@ -90,15 +95,7 @@ def test_a_torque_that_falls_with_the_sweep_is_a_torque_speed_line_not_a_gain(tm
     """Plant B's voltage-limited motor, tau = tau_cmd max(0, 1 - |theta'|/w0), with a size and seed of its own: a
     lower gain fits most of it; the torque-speed line replaces it, with the plant's no-load sweep within 20 %."""
     no_load = 110.0      # [rad/s] plant B's w0 (its suite has 137)
-    subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
-        import sys
-        from plant_b import effects as E
-        from plant_b.suite import simulate, write
-        effs = [E.BackEMF({no_load})]
-        out, strides, summary, _ = simulate("speed", effs, {SEED + 2})
-        write(sys.argv[1], "speed", effs, {SEED + 2}, out, strides, summary)
-        """), str(tmp_path)], check=True, capture_output=True, timeout=300, cwd=HERE)
-    result = diagnose_file(tmp_path / "speed.csv")
+    result = diagnose_file(plant_b_recording(tmp_path, "speed", f"E.BackEMF({no_load})", SEED + 2))
     assert [r.name for r in result.chosen] == ["torque_speed_slope"], result.verdict
     assert 1.0 / result.chosen[0].magnitude == pytest.approx(no_load, rel=0.2), result.verdict
     assert "torque_gain" in [r.name for r in result.chosen[0].ties], result.verdict
@@ -111,15 +108,7 @@ def test_a_spring_that_softens_is_its_quadratic_term_not_a_softer_leg_with_patch
     leg and discovered terms along the leg beside it; the spring's quadratic term replaces both, with the plant's
     k2 within 20 %, and the softer leg stays as its look-alike."""
     k2 = 10000.0
-    subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
-        import sys
-        from plant_b import effects as E
-        from plant_b.suite import simulate, write
-        effs = [E.SofteningSpring({k2})]
-        out, strides, summary, _ = simulate("softening", effs, {SEED + 1})
-        write(sys.argv[1], "softening", effs, {SEED + 1}, out, strides, summary)
-        """), str(tmp_path)], check=True, capture_output=True, timeout=300, cwd=HERE)
-    result = diagnose_file(tmp_path / "softening.csv")
+    result = diagnose_file(plant_b_recording(tmp_path, "softening", f"E.SofteningSpring({k2})", SEED + 1))
     assert [r.name for r in result.chosen] == ["spring_quadratic"], result.verdict
     assert result.chosen[0].magnitude == pytest.approx(-k2, rel=0.2), result.verdict
     assert "leg_stiffness" in [r.name for r in result.chosen[0].ties], result.verdict
