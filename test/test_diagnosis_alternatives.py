@@ -36,7 +36,7 @@ def plant_b_recording(folder: Path, name: str, effect: str, seed: int) -> Path:
         effs = [{effect}]
         out, strides, summary, _ = simulate("{name}", effs, {seed})
         write(sys.argv[1], "{name}", effs, {seed}, out, strides, summary)
-        """), str(folder)], check=True, capture_output=True, timeout=300, cwd=HERE)
+        """), str(folder)], check=True, capture_output=True, timeout=900, cwd=HERE)   # a hang guard
     return folder / f"{name}.csv"
 
 
