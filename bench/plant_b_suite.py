@@ -44,7 +44,8 @@ MATCH = {
     "spring_stiffness_drift": ({"leg_stiffness": None}, {"stance_along"}),
     "hip_torque_axial_coupling": ({}, {"stance_along"}),
     "boom_ringing_after_liftoff": ({}, {"flight_vertical", "flight_horizontal"}),
-    "umbilical_tether_pull": ({"boom_friction_horizontal": None, "flight_damping_horizontal": None},
+    "umbilical_tether_pull": ({"boom_bearing_friction": lambda m: m / BODY_MASS, "boom_friction_horizontal": None,
+                               "flight_damping_horizontal": None},
                               {"flight_horizontal"}),
 }
 

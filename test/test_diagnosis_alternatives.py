@@ -2,9 +2,10 @@
 torque; hopper_ros/diagnosis/alternatives.py): a torque dead band of plant B (test/plant_b/, written blind) with a
 size and seed of its own (not its suite's case) is named as a dead band, where the library's nearest law is a dry
 friction of the hip, and a torque that falls with the leg's sweep as a torque-speed line, not a gain; the
-independent plant's real dry hip friction and torque gain keep their names; a softening spring of plant B (a
-diagnosis of minutes: `long`). The laws themselves: a command inside the dead band gives no torque, the
-torque-speed line, the spring's quadratic term."""
+independent plant's real dry hip friction, torque gain and flight-only boom friction keep their names; plant B's
+cable pulling back in every phase is a friction of the boom's bearing in stance too, not the flight's alone; a
+softening spring of plant B (a diagnosis of minutes: `long`). The laws themselves: a command inside the dead band
+gives no torque, the torque-speed line, the spring's quadratic term, the bearing's friction in stance."""
 
 import json
 import subprocess
@@ -64,6 +65,14 @@ def test_the_spring_quadratic_term_adds_k2_times_the_compression_squared():
     assert laws.leg_force(softening, rho, 0.0) - laws.leg_force(plain, rho, 0.0) == pytest.approx(-9000.0 * 0.04 ** 2)
 
 
+def test_the_bearing_friction_in_stance_brakes_the_forward_motion_only():
+    plain = laws.Coefficients()
+    braked = plain.replace(stance_friction_y=0.2)
+    state = (0.0, 0.19, 1.2, -0.4, 0.0, -0.03)      # y, z, y', z', ground depth, toe y [m, m/s]
+    off, on = laws.stance_forces(plain, *state, 1.0), laws.stance_forces(braked, *state, 1.0)
+    assert on.ydd - off.ydd == pytest.approx(-0.2, rel=1e-3) and on.zdd == pytest.approx(off.zdd)
+
+
 @pytest.mark.compute
 def test_a_torque_dead_band_is_named_as_one_not_as_the_hips_dry_friction(dead_band):
     """The dry friction fits most of it (both take torque while the ramp is above the band); the dead band gives
@@ -80,10 +89,13 @@ def test_a_torque_dead_band_is_named_as_one_not_as_the_hips_dry_friction(dead_ba
 
 @pytest.mark.compute
 @pytest.mark.parametrize("recording, effect, law", [("hip_friction_coulomb", "hip_dry_friction", "torque_dead_band"),
-                                                    ("actuator_gain", "torque_gain", "torque_speed_slope")])
+                                                    ("actuator_gain", "torque_gain", "torque_speed_slope"),
+                                                    ("flight_boom_coulomb", "boom_friction_horizontal",
+                                                     "boom_bearing_friction")])
 def test_a_real_library_effect_keeps_its_name(tmp_path, recording, effect, law):
-    """The independent plant's Coulomb friction in the hip gearbox (0.4 N m), its torque gain (0.85): the law of the
-    same part is tried in its place and does not win."""
+    """The independent plant's Coulomb friction in the hip gearbox (0.4 N m), its torque gain (0.85), its boom
+    bearing's friction while airborne (0.15 m/s^2, flight only): the law of the same part is tried in its place and
+    does not win."""
     write_suite(tmp_path, (recording,))
     result = diagnose_file(tmp_path / f"{recording}.csv")
     names = [r.name for r in result.chosen]
@@ -99,6 +111,19 @@ def test_a_torque_that_falls_with_the_sweep_is_a_torque_speed_line_not_a_gain(tm
     assert [r.name for r in result.chosen] == ["torque_speed_slope"], result.verdict
     assert 1.0 / result.chosen[0].magnitude == pytest.approx(no_load, rel=0.2), result.verdict
     assert "torque_gain" in [r.name for r in result.chosen[0].ties], result.verdict
+
+
+@pytest.mark.compute
+def test_a_pull_in_every_phase_is_the_bearings_friction_in_stance_too_not_the_flights_alone(tmp_path):
+    """Plant B's power cable dragged behind the robot, a constant backward force in every phase, with a size and
+    seed of its own: the flight-only boom friction fits the flights and overshoots to make up the stances; the
+    friction in every phase replaces it, with the plant's pull within 10 % (a m_b, m_b = 2.2 kg), and the flight's
+    stays as its look-alike."""
+    pull = 0.3       # [N] plant B's F (its suite has 0.21)
+    result = diagnose_file(plant_b_recording(tmp_path, "tether", f"E.TetherPull({pull})", SEED + 3))
+    assert [r.name for r in result.chosen] == ["boom_bearing_friction"], result.verdict
+    assert 2.2 * result.chosen[0].magnitude == pytest.approx(pull, rel=0.1), result.verdict
+    assert "boom_friction_horizontal" in [r.name for r in result.chosen[0].ties], result.verdict
 
 
 @pytest.mark.compute

@@ -64,11 +64,11 @@ def diagnose(rec: Recording, params: ModelParams, settings: Settings, model_effe
     progress.say("the accepted effects' secondary parameters and look-alikes")
     fit_secondary(search, chosen)
     discovered_look_alikes(search, chosen, log.discoveries)
-    chosen = told_apart(search, chosen)       # a library effect that is the look-alike of a law of the same part
+    floor = noise_floor(data, moves)
+    chosen = told_apart(search, chosen, floor)    # a library effect that is the look-alike of a law of the same part
     state = _accepted(search, chosen, log, model, base_sim["series"], moves)
     drifts = find_drift(data, state.current, settings)[:1]
     after = drifts[0].after if drifts else state.after     # the model with the drift
-    floor = noise_floor(data, moves)
     residual_location = _drifted_location(data, state, drifts)
     left = completeness(model.errors, after, floor, residual_location, settings)
     def unused_law():

@@ -33,6 +33,8 @@ BACKLASH = "theta_backlash"   # the sensors' key of the leg angle encoder's back
 # the sensors' keys of an error of the forward position's reading periodic in the boom's angle (`periodic_y`) [m, m, m]
 Y_PERIODIC = ("y_periodic_sin", "y_periodic_cos", "y_periodic_period")
 SWING = "leg_swing"     # the sensors' key of the leg's swing reacting on the body in flight, mu r_c [m] (`swing`)
+FALL_SAMPLES = 5        # the height samples before touchdown its fall's speed is taken over (`backlash_ramps`)
+MIN_FALL = 0.05         # [m/s] ... at least this (a touchdown at the top of a hop's flight: no timing to move)
 
 
 def periodic_y(y, a, b, period):
@@ -54,6 +56,40 @@ def backlash_reading(theta: np.ndarray, start: np.ndarray, half: np.ndarray) -> 
         r = np.where(np.isfinite(theta[:, j]), np.clip(r, theta[:, j] - h, theta[:, j] + h), theta[:, j])
         out[:, j] = r
     return out
+
+
+def backlash_ramps(data: StrideData, tau_0: np.ndarray, ramp_duration: np.ndarray, read: np.ndarray,
+                   held: np.ndarray, play: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (2.32) ramps of lanes whose leg was held at `held` where the encoder read `read`, through a `play` (a
+    backlash; other lanes unchanged). The stride extraction timed touchdown where z - rho_0 cos(theta) crossed zero
+    with the reading, earlier than the held leg by the toe's height difference rho_0 (cos read - cos held) over the
+    fall's speed, and read the ramp's line from there, or where the torque was still zero there, from between its
+    last zero and first sample on (`strides.ramp_from_torque`). The drive started it where the held leg met the
+    ground: the line is kept, started there (`data.earlier_ramps` by minus the difference; plant B's backlash of 9.3
+    mrad: 0.17 ms, and a torque gain of 0.9955 was named beside it). Recordings that log the commands give the ramps
+    as the drive ran them: unchanged."""
+    if data.rec.commands:
+        return tau_0, ramp_duration
+    from hopper_ros.identification.strides import ExtractionSettings
+
+    from .data import earlier_ramps
+    s, rec = data.strides, data.rec
+    settings = ExtractionSettings()
+    at = np.clip(np.searchsorted(rec.t, s.touchdown_time), FALL_SAMPLES + 1, len(rec.t) - 1)
+    before = at - 1 - FALL_SAMPLES
+    fall = (rec.z[at - 1] - rec.z[before]) / (rec.t[at - 1] - rec.t[before])     # [m/s], negative
+    read_from = np.zeros(len(s))        # [s] where after the reading's touchdown the extraction started the ramp
+    for i, (a, touchdown) in enumerate(zip(at, s.touchdown_time)):
+        j = a
+        while (j + 1 < len(rec.t) and abs(rec.tau[j]) <= settings.zero_torque
+               and rec.t[j] - touchdown <= settings.late_torque):
+            j += 1
+        if j > a:
+            read_from[i] = 0.5 * (rec.t[j - 1] + rec.t[j]) - touchdown
+    lanes = len(read) // len(s)
+    delay = data.params.rest_length * (np.cos(read) - np.cos(held)) / np.tile(np.maximum(-fall, MIN_FALL), lanes)
+    later = np.where(play > 0.0, delay - np.tile(read_from, lanes), 0.0)
+    return earlier_ramps(tau_0, ramp_duration, -later)
 
 
 def hold_direction(data: StrideData) -> np.ndarray:
@@ -167,6 +203,8 @@ def _simulate(data: StrideData, variants: list[Variant], keep_series: bool) -> d
         e0, slope0 = periodic_y(y0, a, b, period)
         speed_read = 1.0 + slope0
     tau_0, ramp_duration = np.tile(s.tau_0, nv), np.tile(s.ramp_duration, nv)
+    if np.any(play > 0.0):
+        tau_0, ramp_duration = backlash_ramps(data, tau_0, ramp_duration, held, theta_td, play)
     if np.any(coef.foot_radius != 0.0):     # a round toe lands before the point toe the ramps were timed from
         from .foot import lane_ramps
         tau_0, ramp_duration = lane_ramps(data, coef, z0, theta_td, tau_0, ramp_duration)

@@ -85,6 +85,8 @@ class Coefficients:
     quadratic_drag: object = 0.0            # c [1/m]: a = -c |v| v
     flight_friction_y: object = 0.0         # [m/s^2] dry friction of the boom about its vertical axis
     flight_friction_z: object = 0.0         # [m/s^2] ... about its horizontal axis
+    stance_friction_y: object = 0.0         # [m/s^2] the vertical axis's dry friction in stance too (a bearing turns
+    #                                         whenever the body moves forward, not only in flight)
     horizontal_mass_ratio: object = 0.0     # r: horizontal effective mass m_b (1 + r) (the boom's inertia)
     track_gravity: object = 0.0             # [m/s^2] gravity along the track (a tilted boom axis), every phase
     boom_curvature: object = 0.0            # 1/R^2 [1/m^2]: the body carried on the boom's sphere of radius R ...
@@ -192,7 +194,7 @@ GATED = ("quadratic_drag", "flight_friction_y", "flight_friction_z", "track_grav
          "quadratic_damping", "leg_friction", "leg_hysteresis", "leg_relaxing_stiffness", "hip_viscous", "hip_friction",
          "hip_ripple_sin", "hip_ripple_cos",
          "ground_stiffness", "rotor_inertia", "drive_voltage", "servo_stiffness", "foot_radius", "torque_dead_band",
-         "torque_speed_slope")
+         "torque_speed_slope", "stance_friction_y")
 
 
 def is_on(c: Coefficients, name: str) -> bool:
@@ -428,6 +430,8 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     ydd = (-force * sin - across * cos) / (c.mass * (1.0 + c.horizontal_mass_ratio))
     if is_on(c, "track_gravity"):
         ydd = ydd + c.track_gravity
+    if is_on(c, "stance_friction_y"):       # the boom's bearing brakes the forward motion in stance as in flight
+        ydd = ydd - c.stance_friction_y * smooth_sign(ydot)
     zdd = (force * cos - across * sin) / c.mass - c.gravity
     if is_on(c, "boom_curvature"):
         sphere_y, sphere_z = boom_sphere(c, z, ydot, zdot)
