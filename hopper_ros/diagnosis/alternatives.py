@@ -5,8 +5,9 @@ An accepted library effect may be the nearest library law of a mechanism the lib
 effect with a law of its part here (`ALTERNATIVES`) is searched again beside the others, against that law in its
 place. The law replaces it where held-out strides tell the two apart in its favour (paired t of at least `tie_t`,
 below which two effects are not separable: both are laws of one magnitude, neither has a naming margin), it passes
-every guard of an effect, and its next apex is not worse (`apex_tolerance`; an error still within the noise
-floor is not worse: plant B's tether, E_t 0.0392 % for 0.0380 %, floor 0.042 %). Where discovered terms were accepted
+every guard of an effect, and its next apex is not worse (`apex_tolerance`; an error within `floor_factor` of its
+noise floor, where the recording counts as explained, is not worse: plant B's tether pull, E_t 0.0448 % for 0.0424 %,
+floor 0.0405 %, beside E_p 0.076 % for 0.087 %). Where discovered terms were accepted
 at the law's site (they patched what the look-alike left), the law is also tried in place of both: it replaces them
 where the smaller set fits held-out strides not clearly worse (paired t below `tie_t`) with its next apex not worse.
 The library effect then stays beside the law as its look-alike. The laws are not in the library's rounds: a larger
@@ -156,9 +157,10 @@ def told_apart(search: Search, chosen: list[Scored], floor: Errors | None = None
                 better = (acceptance.paired_t(held.sse, whole.sse) < settings.tie_t
                           and not acceptance.worse_errors(held.errors, whole.errors, settings.apex_tolerance))
             else:
+                worse = acceptance.worse_errors(law.errors, again.errors, settings.apex_tolerance)
                 better = (acceptance.paired_t(again.held_sse, law.held_sse) >= settings.tie_t
-                          and not [k for k in acceptance.worse_errors(law.errors, again.errors, settings.apex_tolerance)
-                                   if floor is None or getattr(law.errors, k) > getattr(floor, k)])
+                          and not [k for k in worse
+                                   if floor is None or getattr(law.errors, k) > settings.floor_factor * getattr(floor, k)])
             if not better:
                 continue
             law.ties = [again] + [r for r in accepted.ties if r.name != law.name]
