@@ -157,10 +157,9 @@ def told_apart(search: Search, chosen: list[Scored], floor: Errors | None = None
                 better = (acceptance.paired_t(held.sse, whole.sse) < settings.tie_t
                           and not acceptance.worse_errors(held.errors, whole.errors, settings.apex_tolerance))
             else:
-                worse = acceptance.worse_errors(law.errors, again.errors, settings.apex_tolerance)
-                better = (acceptance.paired_t(again.held_sse, law.held_sse) >= settings.tie_t
-                          and not [k for k in worse
-                                   if floor is None or getattr(law.errors, k) > settings.floor_factor * getattr(floor, k)])
+                worse = [k for k in acceptance.worse_errors(law.errors, again.errors, settings.apex_tolerance)
+                         if floor is None or getattr(law.errors, k) > settings.floor_factor * getattr(floor, k)]
+                better = acceptance.paired_t(again.held_sse, law.held_sse) >= settings.tie_t and not worse
             if not better:
                 continue
             law.ties = [again] + [r for r in accepted.ties if r.name != law.name]
