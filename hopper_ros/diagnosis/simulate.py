@@ -70,7 +70,7 @@ def backlash_ramps(data: StrideData, tau_0: np.ndarray, ramp_duration: np.ndarra
     as the drive ran them: unchanged."""
     if data.rec.commands:
         return tau_0, ramp_duration
-    from hopper_ros.identification.strides import ExtractionSettings
+    from hopper_ros.identification.strides import ExtractionSettings, torque_start
 
     from .data import earlier_ramps
     s, rec = data.strides, data.rec
@@ -78,14 +78,10 @@ def backlash_ramps(data: StrideData, tau_0: np.ndarray, ramp_duration: np.ndarra
     at = np.clip(np.searchsorted(rec.t, s.touchdown_time), FALL_SAMPLES + 1, len(rec.t) - 1)
     before = at - 1 - FALL_SAMPLES
     fall = (rec.z[at - 1] - rec.z[before]) / (rec.t[at - 1] - rec.t[before])     # [m/s], negative
-    read_from = np.zeros(len(s))        # [s] where after the reading's touchdown the extraction started the ramp
-    for i, (a, touchdown) in enumerate(zip(at, s.touchdown_time)):
-        j = a
-        while (j + 1 < len(rec.t) and abs(rec.tau[j]) <= settings.zero_torque
-               and rec.t[j] - touchdown <= settings.late_torque):
-            j += 1
-        if j > a:
-            read_from[i] = 0.5 * (rec.t[j - 1] + rec.t[j]) - touchdown
+    end = np.searchsorted(rec.t, s.touchdown_time + settings.late_torque, side="right") + 1
+    # [s] where after the reading's touchdown the extraction started the ramp (none started: 0, no ramp to move)
+    read_from = np.array([torque_start(rec.t[a:b] - touchdown, rec.tau[a:b], settings) or 0.0
+                          for a, b, touchdown in zip(at, end, s.touchdown_time)])
     lanes = len(read) // len(s)
     delay = data.params.rest_length * (np.cos(read) - np.cos(held)) / np.tile(np.maximum(-fall, MIN_FALL), lanes)
     later = np.where(play > 0.0, delay - np.tile(read_from, lanes), 0.0)

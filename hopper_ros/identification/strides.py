@@ -316,20 +316,29 @@ def _command_for(rec: Recording, flight_start: float, touchdown: float):
     return chosen
 
 
+def torque_start(since: np.ndarray, tau: np.ndarray, s: ExtractionSettings) -> float | None:
+    """[s] after the touchdown `since` counts from, where the stance torque's ramp starts: 0 where the torque is on
+    at the first sample from touchdown, else between its last zero and first nonzero sample; None where it never
+    starts, or starts later than `late_torque` (no ramp)."""
+    on = (np.abs(tau) > s.zero_torque) & (since >= 0.0)
+    if not np.any(on):
+        return None
+    first = int(np.argmax(on))
+    if first == 0 or since[first - 1] < 0.0:
+        return 0.0
+    start = 0.5 * (since[first - 1] + since[first])      # zero at the touchdown: from between its last zero and first
+    return start if start <= s.late_torque else None
+
+
 def ramp_from_torque(since: np.ndarray, tau: np.ndarray, stance_time: float, s: ExtractionSettings):
     """(tau_0, t_f) of the ramp -tau_0 (1 - t/t_f) (2.32) through the stance torque samples, `since` the
     touchdown as the recording's leg length gives it. A torque still zero there that starts within
     `late_torque` began late (the ground lower than the model's, the height read low): its ramp is read from
     its own start, as the leg met it (read from that touchdown it was no ramp at all once it started after
     the skipped samples, and a larger one before)."""
-    on = (np.abs(tau) > s.zero_torque) & (since >= 0.0)
-    if not np.any(on):
+    start = torque_start(since, tau, s)
+    if start is None:
         return 0.0, stance_time
-    first, start = int(np.argmax(on)), 0.0
-    if first > 0 and since[first - 1] >= 0.0:      # zero at the touchdown: from between its last zero and first
-        start = 0.5 * (since[first - 1] + since[first])
-        if start > s.late_torque:
-            return 0.0, stance_time
     # away from both ends: the drive lags at the ramp's start, and the detected lift-off is late, so
     # the last stance samples may already hold the flight's leg regulator torque
     use = (since >= start + s.torque_skip) & (since <= stance_time - s.edge_guard)

@@ -26,8 +26,6 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 
 import numpy as np
-from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
 
 from . import laws
 from .flight import apex_time, flight_state
@@ -226,6 +224,8 @@ def simulate_stride(
     sets t_f to the predicted lift-off time. With `sample_period` the full trajectory is
     sampled on t0 + n * sample_period.
     """
+    from scipy.integrate import solve_ivp     # here, not at the top: the nodes that import this module for
+    from scipy.optimize import brentq         # its types need neither (0.6 s of a process's start)
     p = params
     g, dh, dv, rho_0 = p.gravity, p.flight_damping_horizontal, p.flight_damping_vertical, p.rest_length
     apex = EventState(t0, y0, apex_height, forward_speed, 0.0, rho_0, touchdown_angle)
