@@ -103,6 +103,7 @@ def test_a_real_library_effect_keeps_its_name(tmp_path, recording, effect, law):
 
 
 @pytest.mark.compute
+@pytest.mark.long     # a diagnosis of 50 s CPU: `make bench` runs it (bench/bench_long_tests.py)
 def test_a_torque_that_falls_with_the_sweep_is_a_torque_speed_line_not_a_gain(tmp_path):
     """Plant B's voltage-limited motor, tau = tau_cmd max(0, 1 - |theta'|/w0), with a size and seed of its own: a
     lower gain fits most of it; the torque-speed line replaces it, with the plant's no-load sweep within 20 %."""
@@ -127,7 +128,7 @@ def test_a_pull_in_every_phase_is_the_bearings_friction_in_stance_too_not_the_fl
 
 
 @pytest.mark.compute
-@pytest.mark.long     # a diagnosis of minutes (discovery at the leg); `make bench` diagnoses plant B's s04 and p2
+@pytest.mark.long     # a diagnosis of minutes (discovery at the leg): `make bench` runs it (bench/bench_long_tests.py)
 def test_a_spring_that_softens_is_its_quadratic_term_not_a_softer_leg_with_patches(tmp_path):
     """Plant B's softening spring, F = k x - k2 x^2, with a size and seed of its own: the rounds end with a softer
     leg and discovered terms along the leg beside it; the spring's quadratic term replaces both, with the plant's

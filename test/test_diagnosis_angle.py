@@ -19,8 +19,7 @@ from hopper_ros.diagnosis.simulate import backlash_reading
 from hopper_ros.physics.params import load_params
 from hopper_ros.recording.recordings import load_recording
 
-# CPU-bound, but not marked `compute`: `make test` (tools/test.sh) runs this module in the node tests' session, which
-# had 3-4 minutes less to do than the compute session (9:30 against 6:01), so the two end closer together
+pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
 
 HERE = Path(__file__).resolve().parent
 BACKLASH = 0.007                                   # [rad] the play between the leg and its encoder
@@ -40,7 +39,7 @@ def recordings(tmp_path_factory):
                                  ("clean", [], seed_of("clean") + 11)):
             out, strides, summary, _ = simulate(name, effs, seed)
             write(sys.argv[1], name, effs, seed, out, strides, summary)
-        """), str(folder)], check=True, capture_output=True, timeout=300, cwd=HERE)
+        """), str(folder)], check=True, capture_output=True, timeout=900, cwd=HERE)
     return folder
 
 
@@ -52,6 +51,7 @@ def test_the_play_operator_stands_still_after_a_reversal_then_lags_by_half_the_p
     assert read[-1] == pytest.approx(0.002)                      # ... then 2 mrad above on the way down
 
 
+@pytest.mark.long     # a diagnosis of 60 s CPU: `make bench` runs it (bench/bench_long_tests.py)
 def test_an_encoder_backlash_is_named_by_its_width_not_an_actuator_lag(recordings):
     """The leg angle read through a 7 mrad play: the late start of stance it makes was named an actuator lag (with a
     y scale); now the backlash is named with its width within 25 %, in words and in --json, and the stand-in is
@@ -113,6 +113,6 @@ def test_clean_recordings_depend_on_no_angle_nor_reversal(recordings):
         from suite import simulate, write
         meas, truth, _ = simulate("clean_a", [], 1001)
         write(Path(sys.argv[1]), "c_clean", meas, truth)
-        """), str(recordings)], check=True, capture_output=True, timeout=300, cwd=HERE)
+        """), str(recordings)], check=True, capture_output=True, timeout=900, cwd=HERE)
     for name in ("clean", "c_clean"):
         assert on_plain_model(load_recording(recordings / f"{name}.csv"), params, settings) is None, name

@@ -19,8 +19,11 @@ from independent_plant.suite import write_suite  # noqa: E402
 
 pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
 
-SUBSET = ("clean_1", "flight_air_drag", "actuator_saturation", "leg_slide_coulomb", "leg_rest_length", "other_flight_lift",
-          "other_ground_higher", "other_tether", "other_boom_bending", "sensor_z_delay", "other_toe_slip")
+SUBSET = ("clean_1", "flight_air_drag", "actuator_saturation", "leg_slide_coulomb", "leg_rest_length", "boom_gravity",
+          "other_ground_higher", "other_tether", "other_boom_bending", "sensor_y_scale")
+# make test's budget: the lift in flight, the z delay and the toe slip (40 s a diagnosis, each partly explained and
+# searched by every stage) are diagnosed by `make bench` with the other 30; the boom's gravity (8 s) stands for the
+# lift in test_json_verdict (a discovered look-alike in flight, vertical), the y scale (5 s) for the sensor faults
 # the pairs and the hip's torsion spring, which restart the rounds: test_diagnosis_independent_pairs.py (a module of
 # their own, so that `make test` runs them in its other compute session, tools/test.sh)
 
@@ -86,8 +89,8 @@ def test_located_where_the_effects_act(suite, name):
 def test_json_verdict(suite):
     """A discovered term set is written with its terms in SI units, beside the library effect it cannot be told
     apart from on this data, with the experiment that would separate them."""
-    truth, result, _, folder = suite["other_flight_lift"]
-    doc = json.loads((folder / "other_flight_lift.verdict.json").read_text())
+    truth, result, _, folder = suite["boom_gravity"]
+    doc = json.loads((folder / "boom_gravity.verdict.json").read_text())
     entry = doc["verdict"][0]
     found = [e for e in [entry, *entry["look_alikes"]] if e["kind"] == "discovered"]
     assert found and found[0]["site"] == "flight_vertical", entry

@@ -122,6 +122,7 @@ def test_hysteresis_in_the_leg_force_is_named_by_its_bound_not_a_dry_friction(re
     assert "Bouc-Wen" in entry["words"]
 
 
+@pytest.mark.long     # a diagnosis of 50 s CPU, every stage searched: `make bench` runs it (bench/bench_long_tests.py)
 def test_air_that_leaks_from_the_leg_is_named_a_relaxing_force_not_a_preload_or_a_stiffer_spring(recordings):
     """Plant C's air chamber at a size and leak the suite does not use (L = V0/A = 130 mm, 45 ms: neither on the
     search's grid): named `leg_relaxation` alone, an air spring that leaks, and explained; before the pattern search

@@ -27,6 +27,8 @@ from hopper_ros.recording.mapping import noise_level
 from hopper_ros.recording.recordings import load_csv
 from hopper_ros.sim.config import SENSORS, load_sim_config
 
+pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
+
 ROBOT = "robots/hopper_b/model.yaml"
 HARDWARE = "robots/hopper_b/hardware.yaml"
 CONCEALED = "quadratic_drag"

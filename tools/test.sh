@@ -8,13 +8,14 @@
 #   threads stalled: a parallel kernel waits for its slowest thread, and a nice-19 thread on the core a
 #   node test holds gets about 1/70 of it (a diagnosis beside one busy loop: 22.8 s with two threads,
 #   16.1 s with one; 9.9 s with two on an idle machine).
-# Tests marked `long` (a diagnosis of minutes, pytest.ini) are left to `make bench`, which diagnoses the same
-# recordings. All report; the exit status fails if any session failed. `pytest test` alone runs everything.
+# Tests marked `long` (a diagnosis of a minute or more, pytest.ini) are left to `make bench`
+# (bench/bench_long_tests.py runs them). All report; the exit status fails if any session failed. `pytest test`
+# alone runs everything.
 set -u
 cd "$(dirname "${BASH_SOURCE[0]}")/.." || exit 1
 PYTHON=.venv/bin/python
 ARGS=(-q -p no:cacheprovider --durations=15)
-FIRST=(test/test_diagnosis_independent.py test/test_diagnosis.py)
+FIRST=(test/test_diagnosis_independent.py test/test_diagnosis.py test/test_diagnosis_angle.py test/test_diagnosis_progress.py)
 logs=()
 pids=()
 trap 'kill "${pids[@]}" 2>/dev/null; rm -f "${logs[@]}"' EXIT
