@@ -88,10 +88,12 @@ def test_a_torque_dead_band_is_named_as_one_not_as_the_hips_dry_friction(dead_ba
 
 
 @pytest.mark.compute
-@pytest.mark.parametrize("recording, effect, law", [("hip_friction_coulomb", "hip_dry_friction", "torque_dead_band"),
-                                                    ("actuator_gain", "torque_gain", "torque_speed_slope"),
-                                                    ("flight_boom_coulomb", "boom_friction_horizontal",
-                                                     "boom_bearing_friction")])
+@pytest.mark.parametrize("recording, effect, law", [
+    ("hip_friction_coulomb", "hip_dry_friction", "torque_dead_band"),
+    # make test's budget: these two (20 s each) are in `make bench` (bench/bench_long_tests.py), whose diagnosis of the
+    # whole independent suite (bench/diagnosis_suite.py) names them too
+    pytest.param("actuator_gain", "torque_gain", "torque_speed_slope", marks=pytest.mark.long),
+    pytest.param("flight_boom_coulomb", "boom_friction_horizontal", "boom_bearing_friction", marks=pytest.mark.long)])
 def test_a_real_library_effect_keeps_its_name(tmp_path, recording, effect, law):
     """The independent plant's Coulomb friction in the hip gearbox (0.4 N m), its torque gain (0.85), its boom
     bearing's friction while airborne (0.15 m/s^2, flight only): the law of the same part is tried in its place and
