@@ -3,7 +3,8 @@
 `laws` is written for floats and arrays alike; numba compiles those functions for one lane's floats
 (`register_jitable`), with the scalar forms of laws' few array helpers overloaded here (`where`, `clip`,
 `ones_like`, `nan_to_num`, `nonzero`, `is_on`). A lane's `Coefficients` is one record of a structured
-array whose fields are the dataclass's (`record_dtype`), so `c.stiffness` reads the same in both.
+array whose fields are the dataclass's (`record_dtype`, with a flag per `*_terms` field: its gate), so
+`c.stiffness` reads the same in both.
 
 `integrate` steps every lane on its own, exactly as `physics.lanes` steps them together (RK4 at h, a
 flight's sample in one step where no event falls in it, the guard's sign change located by linear
@@ -22,6 +23,7 @@ compiled from (numba alone would check only this file's time stamp, not the laws
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -102,8 +104,7 @@ def _nonzero(coefficient):
 def _gate(name: str):
     """The compiled `is_on(c, name)`: the lane's coefficient is not off."""
     if name.endswith("_terms"):
-        source = (f"def gate(c, name):\n    v = c.{name}\n    for i in range(v.shape[0]):\n"
-                  "        if v[i] != 0.0:\n            return True\n    return False\n")
+        source = f"def gate(c, name):\n    return c.{name}_on\n"      # any of its coefficients not 0 (`records`)
     elif name == "ground_friction":
         source = "def gate(c, name):\n    return np.isfinite(c.ground_friction)\n"
     else:
@@ -141,10 +142,12 @@ for _law in (laws.ramp_torque, laws.smooth_sign, laws.flight_y_term, laws.flight
 
 
 def record_dtype() -> np.dtype:
-    """One float per scalar field of `laws.Coefficients`, a float array per `*_terms` field."""
+    """One float per scalar field of `laws.Coefficients`, a float array per `*_terms` field, and per `*_terms` field
+    a flag `<name>_on`: whether any of its coefficients is not 0 (its gate, read once per lane instead of per law)."""
     base = laws.Coefficients()
     return np.dtype([(name, np.float64) for name in laws.Coefficients.scalar_names()]
-                    + [(name, np.float64, (len(getattr(base, name)),)) for name in laws.Coefficients.term_names()])
+                    + [(name, np.float64, (len(getattr(base, name)),)) for name in laws.Coefficients.term_names()]
+                    + [(f"{name}_on", np.bool_) for name in laws.Coefficients.term_names()])
 
 
 RECORD = record_dtype()
@@ -158,6 +161,7 @@ def records(c: laws.Coefficients, n: int) -> np.ndarray:
     for name in laws.Coefficients.term_names():
         for i, value in enumerate(getattr(c, name)):
             out[name][:, i] = value
+        out[f"{name}_on"] = np.any(out[name] != 0.0, axis=1)
     return out
 
 
@@ -213,6 +217,18 @@ def _rk4(c, t, s, k1, h, mode, apex_found, ground_clearance, t_td, tau_0, t_f, t
             s[4] + w * (k1[4] + 2 * k2[4] + 2 * k3[4] + k4[4]), s[5] + w * (k1[5] + 2 * k2[5] + 2 * k3[5] + k4[5]),
             s[6] + w * (k1[6] + 2 * k2[6] + 2 * k3[6] + k4[6]), s[7] + w * (k1[7] + 2 * k2[7] + 2 * k3[7] + k4[7]),
             s[8] + w * (k1[8] + 2 * k2[8] + 2 * k3[8] + k4[8]))
+
+
+TIP_SLOPE = (1.0 - 1e-6) * math.tan(MAX_LEG_ANGLE)    # |dy| below TIP_SLOPE hz: the leg well inside MAX_LEG_ANGLE
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _tipped(dy, hz):
+    """|arctan2(-dy, hz)| > MAX_LEG_ANGLE (the body tipped over), arctan2 skipped where the leg is clearly inside it
+    (a margin of 1e-6 of the slope, far beyond arctan2's rounding: the same answer in every case)."""
+    if hz > 0.0 and np.abs(dy) < TIP_SLOPE * hz:
+        return False
+    return np.abs(np.arctan2(-dy, hz)) > MAX_LEG_ANGLE
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -304,7 +320,7 @@ def _lane(c, lane, apex_height, forward_speed, theta_td, tau_0, ramp_duration, h
             if mode == STANCE:       # collapse or tipping: the stride failed
                 dy, hz = laws.foot_offset(c, s[0], s[1], s[4], s[6])
                 rho = np.sqrt(dy * dy + hz * hz) + c.foot_radius
-                if rho < COLLAPSE_FRACTION * c.rest_length or np.abs(np.arctan2(-dy, hz)) > MAX_LEG_ANGLE:
+                if rho < COLLAPSE_FRACTION * c.rest_length or _tipped(dy, hz):
                     mode = DEAD
                     changed = True
             if changed:

@@ -382,7 +382,10 @@ def stance_forces(c: Coefficients, y, z, ydot, zdot, depth, toe_y, torque, comma
     rho = np.sqrt(dy * dy + hz * hz)
     sin, cos = -dy / rho, hz / rho
     approach = -sin * ydot + cos * zdot                     # rho' with the toe at rest
-    theta = np.arctan2(-dy, hz)
+    theta = 0.0                                             # the leg angle, computed only where a law reads it
+    if (is_on(c, "hip_ripple_sin") or is_on(c, "hip_ripple_cos") or is_on(c, "servo_stiffness")
+            or is_on(c, "hip_terms") or is_on(c, "leg_terms")):
+        theta = np.arctan2(-dy, hz)
     theta_dot = (-ydot * hz + dy * zdot) / (rho * rho)
     arm = rho
     if is_on(c, "foot_radius"):     # the ball rolls: the hip turns about the contact point, r_f below the centre
