@@ -219,3 +219,29 @@ def test_a_ros_shutdown_that_hangs_does_not_keep_the_recorder_from_ending(tmp_pa
     info = bag_info(tmp_path / "bag")
     assert info.complete, info.problems
     assert len(rosbags_messages(tmp_path / "bag")) == info.message_count      # an independent reader opens it
+
+
+def test_a_ros_shutdown_that_holds_the_interpreter_still_ends_the_recorder(tmp_path):
+    """The same with a teardown that never lets the interpreter's lock go (rclpy's native `Publisher.destroy` did, in
+    an event detector: the grace's timer, a Python thread, could not run): faulthandler's watchdog ends the recorder
+    `BACKSTOP` seconds after the grace, with status 1 and the stacks; the bag is complete. (Before, it ran on.)"""
+    import subprocess
+    import sys
+
+    from conftest import REPO
+
+    script = (
+        "import re, rclpy\n"
+        "import hopper_ros.nodes.shutdown_guard\n"
+        "hopper_ros.nodes.shutdown_guard.SHUTDOWN_GRACE = 1.0\n"
+        # a regular expression's backtracking runs in C and keeps the interpreter's lock for hours
+        "rclpy.try_shutdown = lambda *a, **k: re.match(r'(a+)+$', 'a' * 48 + 'b')\n"
+        "from hopper_ros.cli import main\n"
+        f"raise SystemExit(main(['bag', 'record', '-a', '-o', {str(tmp_path / 'bag')!r}, '-d', '0.5']))\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True,
+                          timeout=SAFETY_TIMEOUT)
+    assert done.returncode == 1, done.stderr
+    assert "closed:" in done.stderr and "Timeout" in done.stderr and "Thread" in done.stderr, done.stderr
+    info = bag_info(tmp_path / "bag")
+    assert info.complete, info.problems
+    assert len(rosbags_messages(tmp_path / "bag")) == info.message_count

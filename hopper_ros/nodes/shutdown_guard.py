@@ -5,6 +5,11 @@ seen to hang under load (CI, twice: a recorder after its bag was closed, the mot
 drive had confirmed it was disabled, both inside rclpy's native `destroy_when_not_in_use`). The work
 that matters is done before it: `ShutdownGuard` gives the teardown SHUTDOWN_GRACE seconds, then says so on
 stderr with every thread's stack and ends the process with the status it was going to return.
+
+That timer is a Python thread: it cannot run while the teardown's native call holds the interpreter's lock, as
+rclpy's `Publisher.destroy` did in an event detector (make test, 2026-11-28: its timer and signal watcher waiting
+for the lock, still running 60 s after SIGINT). faulthandler's own watchdog, a thread of C that needs no lock,
+ends such a process BACKSTOP seconds later with the stacks and status 1 (faulthandler's, not a choice here).
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ import sys
 import threading
 
 SHUTDOWN_GRACE = 10.0   # [s] the ROS teardown's time once a process's own work is done
+BACKSTOP = 5.0          # [s] after it, the end of a teardown that holds the interpreter's lock (status 1)
 
 
 class ShutdownGuard:
@@ -31,10 +37,17 @@ class ShutdownGuard:
         self._timer = threading.Timer(self.grace, self._give_up)
         self._timer.daemon = True
         self._timer.start()
+        self._backstop = True
+        try:
+            faulthandler.dump_traceback_later(self.grace + BACKSTOP, exit=True, file=sys.stderr)
+        except (AttributeError, ValueError, OSError, RuntimeError):    # stderr is no file (captured): the timer alone
+            self._backstop = False
         return self
 
     def __exit__(self, *exc_info) -> None:
         self._timer.cancel()
+        if self._backstop:
+            faulthandler.cancel_dump_traceback_later()
 
     def _give_up(self) -> None:
         print(f"{self.who}: the ROS shutdown has not ended in {self.grace:.0f} s ({self.done}); "
