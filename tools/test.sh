@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # `make test`: the suite as three pytest sessions side by side on this 2-core machine.
-# - The node tests (real rclpy nodes, sockets, subprocesses: about one core, 430 CPU-s in 404 s measured
-#   alone) in the foreground, at normal priority, so their timing is what it was when they ran alone.
+# - The node tests (real rclpy nodes, sockets, subprocesses: about one core, 867 CPU-s in 749 s measured
+#   alone on 2026-11-28 before the diagnosis tests among them moved out) in the foreground, at normal priority,
+#   so their timing is what it was when they ran alone.
 # - The CPU-bound diagnosis tests (`pytestmark = pytest.mark.compute`) beside them at nice 19, as two
 #   sessions of one numba thread each, of about equal CPU (FIRST's modules; every other compute module).
 #   They take what the node tests leave idle, then a core each once those are done. One session of two
