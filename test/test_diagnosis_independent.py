@@ -20,10 +20,11 @@ from independent_plant.suite import write_suite  # noqa: E402
 pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
 
 SUBSET = ("clean_1", "flight_air_drag", "actuator_saturation", "leg_slide_coulomb", "leg_rest_length", "boom_gravity",
-          "other_ground_higher", "other_tether", "other_boom_bending", "sensor_y_scale")
-# make test's budget: the lift in flight, the z delay and the toe slip (40 s a diagnosis, each partly explained and
-# searched by every stage) are diagnosed by `make bench` with the other 30; the boom's gravity (8 s) stands for the
-# lift in test_json_verdict (a discovered look-alike in flight, vertical), the y scale (5 s) for the sensor faults
+          "other_tether", "other_boom_bending", "sensor_y_scale")
+# make test's budget: the lift in flight, the higher ground, the z delay and the toe slip (35-45 s a diagnosis, each
+# partly explained and searched by every stage) are diagnosed by `make bench` with the other 30; the boom's gravity
+# (8 s) stands for the lift in test_json_verdict (a discovered look-alike in flight, vertical), the y scale (5 s) for
+# the sensor faults
 # the pairs and the hip's torsion spring, which restart the rounds: test_diagnosis_independent_pairs.py (a module of
 # their own, so that `make test` runs them in its other compute session, tools/test.sh)
 
@@ -103,15 +104,21 @@ def test_json_verdict(suite):
     assert clean["verdict"] == [] and clean["summary"] == "no significant mismatch"
 
 
-def test_stance_start_from_the_held_leg(suite):
+def test_stance_start_from_the_held_leg(suite, tmp_path):
     """With the running surface 8 mm above where the model has it, stance begins before the model's leg reaches
-    the ground: the tool reads theta_td where the held leg starts to turn (not the angle already in stance),
-    times the ramp from there, says so, and names the ground's height."""
-    _, higher, _, _ = suite["other_ground_higher"]
+    the ground: the tool reads theta_td where the held leg starts to turn (not the angle already in stance) and
+    times the ramp from there. (The ground's height is named in `make bench`'s diagnosis of the whole suite: 34 s.)"""
+    from hopper_ros.diagnosis.data import prepare
+    from hopper_ros.physics.params import load_model
+    from hopper_ros.recording.recordings import load_recording
+
+    write_suite(tmp_path, ("other_ground_higher",))
+    settings, (params, _) = Settings(), load_model("model.yaml")
+    higher = prepare(load_recording(tmp_path / "other_ground_higher.csv"), params, settings.min_strides,
+                     settings.liftoff_window)
     _, clean, _, _ = suite["clean_1"]
-    assert 0.003 < higher.data.touchdown_lead < 0.005, higher.data.touchdown_lead
+    assert 0.003 < higher.touchdown_lead < 0.005, higher.touchdown_lead
     assert abs(clean.data.touchdown_lead) < 0.001, clean.data.touchdown_lead
-    assert higher.chosen[0].name in ("ground_height", "z_offset"), higher.verdict
 
 
 def _effect(truth):
