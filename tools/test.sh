@@ -16,7 +16,8 @@ set -u
 cd "$(dirname "${BASH_SOURCE[0]}")/.." || exit 1
 PYTHON=.venv/bin/python
 ARGS=(-q -p no:cacheprovider --durations=15)
-FIRST=(test/test_diagnosis_independent.py test/test_diagnosis.py test/test_diagnosis_angle.py test/test_diagnosis_progress.py)
+FIRST=(test/test_diagnosis_independent.py test/test_diagnosis.py test/test_diagnosis_angle.py test/test_diagnosis_progress.py
+       test/test_import.py)
 logs=()
 pids=()
 trap 'kill "${pids[@]}" 2>/dev/null; rm -f "${logs[@]}"' EXIT
