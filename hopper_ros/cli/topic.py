@@ -126,8 +126,8 @@ def _list(args: argparse.Namespace, node, stop) -> int:
     return 0
 
 
-ECHO_DEPTH = 1000   # messages the subscription holds until they are printed: an echo starved by a busy machine for
-#                    a few hundred ms loses none (with 10, a 200 Hz play lost 9 of 200 under make test's load)
+ECHO_DEPTH = 1000   # messages the subscription holds until they are printed: an echo starved by a busy machine
+#                    loses none (with 10, one of a bag play's 200 apexes was lost under make test's load)
 
 
 def _subscription_qos(publishers):
