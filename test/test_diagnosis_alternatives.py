@@ -8,9 +8,7 @@ softening spring of plant B (a diagnosis of minutes: `long`). The laws themselve
 gives no torque, the torque-speed line, the spring's quadratic term, the bearing's friction in stance."""
 
 import json
-import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -20,9 +18,8 @@ from hopper_ros.diagnosis import diagnose_file
 from hopper_ros.physics import laws
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
-from independent_plant.suite import write_suite  # noqa: E402
+import stored_recordings  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
 DEAD_BAND = 0.35                 # [N m] plant B's tau_db (its suite has 0.27 and 0.21)
 SEED = 4217
 
@@ -30,15 +27,14 @@ SEED = 4217
 def plant_b_recording(folder: Path, name: str, effect: str, seed: int) -> Path:
     """A recording of plant B (its own simulate and writer, in a process of its own) with the one effect `effect`
     (an expression of its effects module, `E`); its CSV's path."""
-    subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
+    return stored_recordings.plant_b(folder, f"""
         import sys
         from plant_b import effects as E
         from plant_b.suite import simulate, write
         effs = [{effect}]
         out, strides, summary, _ = simulate("{name}", effs, {seed})
         write(sys.argv[1], "{name}", effs, {seed}, out, strides, summary)
-        """), str(folder)], check=True, capture_output=True, timeout=900, cwd=HERE)   # a hang guard
-    return folder / f"{name}.csv"
+        """) / f"{name}.csv"
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +94,7 @@ def test_a_real_library_effect_keeps_its_name(tmp_path, recording, effect, law):
     """The independent plant's Coulomb friction in the hip gearbox (0.4 N m), its torque gain (0.85), its boom
     bearing's friction while airborne (0.15 m/s^2, flight only): the law of the same part is tried in its place and
     does not win."""
-    write_suite(tmp_path, (recording,))
+    stored_recordings.independent(tmp_path, (recording,))
     result = diagnose_file(tmp_path / f"{recording}.csv")
     names = [r.name for r in result.chosen]
     assert effect in names and law not in names, result.verdict

@@ -4,14 +4,11 @@ of plant B (test/plant_b/, written blind) with sizes of their own (not its suite
 on which the stage, forced to run on the plain model, says nothing."""
 
 import json
-import subprocess
-import sys
-import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+import stored_recordings
 from hopper_ros.diagnosis import diagnose_file
 from hopper_ros.diagnosis.angle import on_plain_model
 from hopper_ros.diagnosis.settings import Settings
@@ -21,15 +18,13 @@ from hopper_ros.recording.recordings import load_recording
 
 pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
 
-HERE = Path(__file__).resolve().parent
 BACKLASH = 0.007                                   # [rad] the play between the leg and its encoder
 RIPPLE = (0.8, 0.6, 0.5)                           # plant B's A [N m], period [rad of the leg angle], phase
 
 
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("angle")
-    subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
+    return stored_recordings.plant_b(tmp_path_factory.mktemp("angle"), f"""
         import sys
         from plant_b import effects as E
         from plant_b.suite import seed_of, simulate, write
@@ -39,8 +34,7 @@ def recordings(tmp_path_factory):
                                  ("clean", [], seed_of("clean") + 11)):
             out, strides, summary, _ = simulate(name, effs, seed)
             write(sys.argv[1], name, effs, seed, out, strides, summary)
-        """), str(folder)], check=True, capture_output=True, timeout=900, cwd=HERE)
-    return folder
+        """)
 
 
 def test_the_play_operator_stands_still_after_a_reversal_then_lags_by_half_the_play():
@@ -106,13 +100,12 @@ def test_clean_recordings_depend_on_no_angle_nor_reversal(recordings):
     """On clean recordings of plant B and plant C (leg angle quantised only) the stage, forced on the plain model
     (it runs only where the accepted effects leave a mismatch), finds nothing."""
     settings, params = Settings(), load_params()
-    subprocess.run([sys.executable, "-c", textwrap.dedent("""
+    stored_recordings.plant_c(recordings, """
         import sys
         from pathlib import Path
-        sys.path.insert(0, "plant_c")
         from suite import simulate, write
         meas, truth, _ = simulate("clean_a", [], 1001)
         write(Path(sys.argv[1]), "c_clean", meas, truth)
-        """), str(recordings)], check=True, capture_output=True, timeout=900, cwd=HERE)
+        """)
     for name in ("clean", "c_clean"):
         assert on_plain_model(load_recording(recordings / f"{name}.csv"), params, settings) is None, name

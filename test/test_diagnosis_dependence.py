@@ -5,14 +5,12 @@ the stage, even when forced to run, says nothing."""
 
 import json
 import math
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+import stored_recordings
 from hopper_ros.diagnosis import diagnose_file
 from hopper_ros.diagnosis.core import base_variant
 from hopper_ros.diagnosis.data import own_ramps, prepare
@@ -29,18 +27,12 @@ WAVE = {"a": 0.012, "L": 10.9, "phase": 2.0}         # plant B: a 12 mm undulati
 TILT = {"a": 0.012, "phi": 2.5}                      # plant C: a tilted pivot, the floor +-12 mm once a lap
 
 
-def _run(code: str, folder: Path) -> None:
-    subprocess.run([sys.executable, "-c", textwrap.dedent(code), str(folder)], check=True, capture_output=True,
-                   timeout=300, cwd=HERE)
-
-
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory):
     folder = tmp_path_factory.mktemp("dependence")
-    _run(f"""
+    stored_recordings.plant_c(folder, f"""
         import sys
         from pathlib import Path
-        sys.path.insert(0, "plant_c")
         from effects import make
         from suite import simulate, write
         meas, truth, _ = simulate("board", ["floor_board"], 4242, mechanisms=[make("floor_board", **{BOARD!r})])
@@ -50,8 +42,8 @@ def recordings(tmp_path_factory):
         for name, seed in (("clean_a", 1001), ("clean_b", 1002)):
             meas, truth, _ = simulate(name, [], seed)
             write(Path(sys.argv[1]), "c_" + name, meas, truth)
-        """, folder)
-    _run(f"""
+        """)
+    stored_recordings.plant_b(folder, f"""
         import sys
         from plant_b import effects as E
         from plant_b.suite import seed_of, simulate, write
@@ -59,13 +51,8 @@ def recordings(tmp_path_factory):
         for name, effs in (("wave", floor), ("clean", [])):
             out, strides, summary, _ = simulate(name, effs, seed_of(name) + 7)
             write(sys.argv[1], "b_" + name, effs, seed_of(name) + 7, out, strides, summary)
-        """, folder)
-    _run("""
-        import sys
-        from independent_plant.suite import write_suite
-        write_suite(sys.argv[1], ["clean_1", "clean_2"])
-        """, folder)
-    return folder
+        """)
+    return stored_recordings.independent(folder, ["clean_1", "clean_2"])
 
 
 def test_a_board_on_part_of_the_lap_is_said_with_its_height_and_place(recordings):

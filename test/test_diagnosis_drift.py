@@ -5,13 +5,10 @@ with its own generator at a size and seed its suite does not use. The plant's st
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-import textwrap
-from pathlib import Path
 
 import pytest
 
+import stored_recordings
 from hopper_ros.diagnosis.api import load_model, load_recording
 from hopper_ros.diagnosis.core import start
 from hopper_ros.diagnosis.drift import find_drift
@@ -19,7 +16,6 @@ from hopper_ros.diagnosis.settings import load_settings
 
 pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
 
-PLANT_C = Path(__file__).resolve().parent / "plant_c"
 STRIDES = 44                       # a drift is judged on 4 strides a fold at least (10 folds)
 SLIPS = 3.0                        # plant C's mean counts the coupling slips per touchdown (0.21 mm each)
 
@@ -27,16 +23,15 @@ SLIPS = 3.0                        # plant C's mean counts the coupling slips pe
 @pytest.fixture(scope="module")
 def slipping(tmp_path_factory):
     folder = tmp_path_factory.mktemp("drift")
-    subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
+    stored_recordings.plant_c(folder, f"""
         import sys
         from pathlib import Path
-        sys.path.insert(0, ".")
         from effects import make
         from suite import simulate, write
         mechanism = make("elevation_coupling_slip", lam={SLIPS})
         meas, truth, _ = simulate("slip", [mechanism.id], 4201, strides={STRIDES}, mechanisms=[mechanism])
         write(Path(sys.argv[1]), "slip", meas, truth)
-        """), str(folder)], check=True, capture_output=True, timeout=300, cwd=PLANT_C)
+        """)
     return folder
 
 

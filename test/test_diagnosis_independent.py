@@ -15,7 +15,7 @@ from hopper_ros.diagnosis.settings import Settings
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
 from diagnosis_suite import score  # noqa: E402
-from independent_plant.suite import write_suite  # noqa: E402
+import stored_recordings  # noqa: E402
 
 pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
 
@@ -32,7 +32,7 @@ SUBSET = ("clean_1", "flight_air_drag", "actuator_saturation", "leg_slide_coulom
 def diagnosed(folder: Path, names: tuple) -> dict:
     """name -> (truth, diagnosis, score, folder) of the independent plant's recordings `names`, written to `folder`
     (the verdict's JSON beside each)."""
-    write_suite(folder, names)
+    stored_recordings.independent(folder, names)
     out = {}
     for name in names:
         truth = json.loads((folder / f"{name}.json").read_text())
@@ -112,7 +112,7 @@ def test_stance_start_from_the_held_leg(suite, tmp_path):
     from hopper_ros.physics.params import load_model
     from hopper_ros.recording.recordings import load_recording
 
-    write_suite(tmp_path, ("other_ground_higher",))
+    stored_recordings.independent(tmp_path, ("other_ground_higher",))
     settings, (params, _) = Settings(), load_model("model.yaml")
     higher = prepare(load_recording(tmp_path / "other_ground_higher.csv"), params, settings.min_strides,
                      settings.liftoff_window)
@@ -172,7 +172,7 @@ def residuals(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("laws")
     names = ("other_hip_torsion_spring", "other_bump_stop")
-    write_suite(folder, names)
+    stored_recordings.independent(folder, names)
     params, effects = load_model("model.yaml")
     settings = load_settings("diagnosis.yaml")
     out = {}
@@ -223,7 +223,7 @@ def test_a_mismatch_no_force_shows_is_located_by_trajectory(tmp_path):
     from hopper_ros.physics.params import load_model
     from hopper_ros.recording.recordings import load_recording
 
-    write_suite(tmp_path, ("other_toe_slip",))
+    stored_recordings.independent(tmp_path, ("other_toe_slip",))
     folder, settings = tmp_path, Settings()
     params, effects = load_model("model.yaml")
     data = prepare(load_recording(folder / "other_toe_slip.csv"), params, settings.min_strides, settings.liftoff_window)

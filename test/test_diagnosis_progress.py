@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from independent_plant.suite import write_suite  # noqa: E402
+import stored_recordings  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
@@ -19,7 +19,7 @@ pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside th
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     folder = tmp_path_factory.mktemp("progress")
-    write_suite(folder, ("actuator_saturation",))
+    stored_recordings.independent(folder, ("actuator_saturation",))
     return folder / "actuator_saturation.csv"
 
 

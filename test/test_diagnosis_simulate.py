@@ -18,13 +18,13 @@ from hopper_ros.physics.params import load_model
 from hopper_ros.recording.recordings import load_recording
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from independent_plant.suite import write_suite  # noqa: E402
+import stored_recordings  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def data_and_base(tmp_path_factory):
     folder = tmp_path_factory.mktemp("simulate")
-    write_suite(folder, ("pair_toemass_delay",))
+    stored_recordings.independent(folder, ("pair_toemass_delay",))
     settings = Settings()
     params, effects = load_model("model.yaml")
     data = prepare(load_recording(folder / "pair_toemass_delay.csv"), params, settings.min_strides,

@@ -12,21 +12,17 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
-import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+import stored_recordings
 from hopper_ros.diagnosis import diagnose_file
 from hopper_ros.diagnosis.simulate import periodic_y
 from hopper_ros.physics import laws
 
 pytestmark = pytest.mark.compute   # CPU-bound: `make test` runs these beside the node tests (tools/test.sh)
 
-PLANT_C = Path(__file__).resolve().parent / "plant_c"
 STRIDES = 28
 HYSTERESIS = (2000.0, 0.0025)            # plant C's k_h [N/m], x_y [m]: a bound of 5 N
 LAP = 2 * math.pi * (1.65 + 0.09)
@@ -43,10 +39,9 @@ AIR = (5e-4, 6.5e-5, 0.045)              # plant C's air chamber: piston area A 
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory):
     folder = tmp_path_factory.mktemp("unused")
-    subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
+    stored_recordings.plant_c(folder, f"""
         import sys
         from pathlib import Path
-        sys.path.insert(0, ".")
         from effects import make
         from suite import simulate, write
         k_h, x_y = {HYSTERESIS!r}
@@ -64,7 +59,7 @@ def recordings(tmp_path_factory):
         pair = [make("round_foot", r_f={PAIR[0]}), make("motor_back_emf", V={PAIR[1]}, R={PAIR[2]})]
         meas, truth, _ = simulate("pair", [m.id for m in pair], 4108, strides={STRIDES}, mechanisms=pair)
         write(Path(sys.argv[1]), "pair", meas, truth)
-        """), str(folder)], check=True, capture_output=True, timeout=300, cwd=PLANT_C)
+        """)
     return folder
 
 

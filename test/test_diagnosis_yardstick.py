@@ -4,13 +4,11 @@ independent plant, test/plant_c/) whose leg angle is quantised only, as an incre
 
 import json
 import math
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+import stored_recordings
 from hopper_ros.diagnosis import diagnose_file
 from hopper_ros.diagnosis.core import base_variant
 from hopper_ros.diagnosis.data import PHASES, prepare
@@ -22,14 +20,15 @@ from hopper_ros.identification.strides import ExtractionSettings, _apex
 from hopper_ros.physics.params import load_params
 from hopper_ros.recording.recordings import load_recording
 
-PLANT_C = Path(__file__).resolve().parent / "plant_c"
 
 
 @pytest.fixture(scope="module")
 def clean_recordings(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("plant_c")
-    subprocess.run([sys.executable, str(PLANT_C / "suite.py"), str(folder), "clean_a", "clean_b"], check=True,
-                   capture_output=True, timeout=300)
+    folder = stored_recordings.plant_c(tmp_path_factory.mktemp("plant_c"), """
+        import sys
+        from suite import main
+        main([sys.argv[1], "clean_a", "clean_b"])
+        """)
     return [folder / "clean_a.csv", folder / "clean_b.csv"]
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+import stored_recordings
 from hopper_ros.diagnosis import diagnose_file
 
 HERE = Path(__file__).resolve().parent
@@ -28,11 +29,11 @@ def test_plant_b_checks_itself_against_the_thesis():
 
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("plant_b")
-    subprocess.run([sys.executable, str(HERE / "plant_b" / "suite.py"), str(folder), "clean", "s02_boom_descent_drag",
-                    "o2_stiffness_drift"],
-                   check=True, capture_output=True, timeout=600)
-    return folder
+    return stored_recordings.plant_b(tmp_path_factory.mktemp("plant_b"), """
+        import sys
+        from plant_b.suite import main
+        main([sys.argv[1], "clean", "s02_boom_descent_drag", "o2_stiffness_drift"])
+        """)
 
 
 def test_clean_recording_of_another_plant_is_clean(recordings):

@@ -186,10 +186,12 @@ def run_with_sim_robot(rclpy_session, hopper_cli, tmp_path, mode: str, duration:
     return listener
 
 
-def compare_with_sim(got, freezes: int = 0):
-    """Our events on the simulator's clock against its true events: (report, truth, stamps). `freezes`: how
-    often the simulated robot, further behind the wall clock than it catches up, froze its world (its clock
-    then steps against the host's, and so does the mapping of its stamps)."""
+def compare_with_sim(got, anchors: int, freezes: int):
+    """Our events on the simulator's clock against its true events: (report, truth, stamps). `anchors`: how
+    often the estimator's clock mapping re-anchored (its diagnostics' clock_anchors): where the simulated robot,
+    further behind the wall clock than it catches up, froze its world (`freezes`; its clock then steps against
+    the host's) and wherever its packets came more than clock_max_error late for clock_reanchor_after (a
+    process starved under load)."""
     # every clock onto the simulator's stamps: our stamp minus (ours - sim's) of the nearest sample
     truth_stamp = {m.sequence: seconds(m.header.stamp) for m in got["truth"]}
     our_stamp = {}
@@ -202,11 +204,15 @@ def compare_with_sim(got, freezes: int = 0):
     known = sorted(offsets)
     # our stamps keep the microcontroller's spacing (the flight fit relies on it) while following the
     # host clock: from one sample to the next the mapping moves by tens of microseconds at most, but where
-    # the robot's own clock stepped (a freeze: one step each; measured, 78-173 steps for 80-174 freezes)
+    # it re-anchored (one step each; measured on 2026-11-28, alone: 15 and 18 steps for 16 and 19 anchors,
+    # 1 freeze; beside two busy processes: 43 and 67 for 44 and 68, 15-17 freezes). The bound was the freezes
+    # alone, from before the mapping re-anchored on late packets too (issue 29): under make test's load it
+    # failed with 118-202 steps for 17-50 freezes.
     steps = np.abs(np.diff([offsets[s] for s in known])) / np.maximum(1, np.diff(known))
     jumps = int(np.sum(steps >= 50e-6))
-    print(f"\nstamp mapping: {jumps} steps of 50 us or more over {len(steps)} samples, the robot froze {freezes} times")
-    assert jumps <= freezes + 0.01 * len(steps), (jumps, freezes)
+    print(f"\nstamp mapping: {jumps} steps of 50 us or more over {len(steps)} samples, {anchors} re-anchors, "
+          f"the robot froze {freezes} times")
+    assert jumps <= anchors + 0.01 * len(steps), (jumps, anchors, freezes)
 
     def offset(sequence: int) -> float:
         index = min(bisect.bisect_left(known, sequence), len(known) - 1)
@@ -230,7 +236,8 @@ def test_nodes_find_every_event_of_the_simulated_robot_within_2_ms(rclpy_session
     listener = run_with_sim_robot(rclpy_session, hopper_cli, tmp_path, "realtime", 8.0,
                                   ("truth", "sim_events", "states", "events", "apex", "diagnostics"))
     got = listener.got
-    report, truth, truth_stamp, first_apex = compare_with_sim(got, listener.freezes)
+    anchors = counters_of(listener.diagnostics("/state_estimator"))["clock_anchors"]
+    report, truth, truth_stamp, first_apex = compare_with_sim(got, anchors, listener.freezes)
     print(f"\n{len(truth.clean_spans)} clean strides: {report.summary()}")
     assert len(truth.clean_spans) >= 8
     assert not report.missed, report.missed
