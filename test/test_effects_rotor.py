@@ -78,6 +78,7 @@ def test_off_changes_nothing_and_the_entry_sets_it():
     assert f == g
 
 
+@pytest.mark.compute   # a diagnosis: `make test` runs it beside the node tests (tools/test.sh)
 def test_simulated_robot_with_the_rotor_is_named_with_its_size(tmp_path):
     """A recording of the simulated robot with the rotor's inertia on (sim.yaml's 5.75e-3 kg m^2) and every sensor
     noise on: the tool names rotor_inertia within 20 % and the model is explained. Fails without the law: the

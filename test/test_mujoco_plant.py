@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 HERE = Path(__file__).resolve().parent / "mujoco_plant"
+pytestmark = pytest.mark.compute   # CPU-bound (the engine's runs): `make test` runs these beside the node tests
 
 try:
     import mujoco  # noqa: F401
