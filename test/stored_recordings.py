@@ -33,7 +33,8 @@ CONFIG_READ = ("config/model.yaml", "config/hardware.yaml")     # what the plant
 PACKED = ".xz"                                                  # suffix of a stored file compressed
 SMALL = 4096                                                    # [bytes] files up to this are stored as they are
 TIMEOUT = 900.0                                                 # [s] a hang guard on a command; no speed asserted
-REFRESH = "HOPPER_STORE_RECORDINGS=1 .venv/bin/python -m pytest -m compute test"
+# every test that reads the store (test_diagnosis_yardstick.py among them is not marked `compute`)
+REFRESH = "HOPPER_STORE_RECORDINGS=1 .venv/bin/python -m pytest $(grep -l stored_recordings test/test_*.py)"
 
 
 def _sources(plant: str) -> dict:
@@ -145,7 +146,8 @@ def stale(entry: Path) -> str | None:
     today = _sources(command["plant"])
     changed = sorted(k for k in command["sources"].keys() | today.keys() if command["sources"].get(k) != today.get(k))
     if changed:
-        return f"{entry.name}: {', '.join(changed)} changed since it was stored; refresh: {REFRESH}"
+        return (f"{entry.name}: {', '.join(changed)} changed since it was stored; refresh: "
+                f"rm -r {os.path.relpath(entry, REPO)} && {REFRESH}")
     if _key(command) != entry.name:
         return f"{entry.name}: its manifest's key is {_key(command)}"
     return None
