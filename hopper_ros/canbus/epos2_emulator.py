@@ -224,8 +224,8 @@ class Epos2Emulator:
                 return True
             self.pdos.on_sync(data, now)
             return True
-        elif self.pdos.rpdo_number(cob) is not None:
-            self.pdos.on_rpdo(self.pdos.rpdo_number(cob), data, now)
+        elif (rpdo := self.pdos.rpdo_number(cob)) is not None:
+            self.pdos.on_rpdo(rpdo, data, now)
         else:
             self._on_consumer_heartbeat(cob, data, now)
 

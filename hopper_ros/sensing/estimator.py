@@ -82,6 +82,32 @@ def _diagonal_inverse(matrix: np.ndarray) -> np.ndarray:
     return np.diag(1.0 / matrix.diagonal())
 
 
+class _LoopKalmanFilter(KalmanFilter):
+    """filterpy's filter with its `predict` and `update` computed as filterpy computes them (the same
+    operations in the same order: the same numbers), without what a 1 kHz loop never reads: the
+    copies of the prior and posterior, the measurement's deep copy, the likelihoods' reset, the
+    control input and the fading memory (alpha 1). A third of the estimator's time at 1 kHz."""
+
+    def predict(self, u=None, B=None, F=None, Q=None):
+        """x = F x, P = F P F' + Q (A.1.2 lines 3, 5)."""
+        F = self.F if F is None else F
+        self.x = np.dot(F, self.x)
+        self.P = np.dot(np.dot(F, self.P), F.T) + (self.Q if Q is None else Q)
+
+    def update(self, z, R=None, H=None):
+        """A.1.2 lines 7-11, the covariance in Joseph form (line 11), for a column `z` of H's rows."""
+        R = self.R if R is None else R
+        H = self.H if H is None else H
+        self.y = z - np.dot(H, self.x)
+        PHT = np.dot(self.P, H.T)
+        self.S = np.dot(H, PHT) + R
+        self.SI = self.inv(self.S)
+        self.K = np.dot(PHT, self.SI)
+        self.x = self.x + np.dot(self.K, self.y)
+        I_KH = self._I - np.dot(self.K, H)
+        self.P = np.dot(np.dot(I_KH, self.P), I_KH.T) + np.dot(np.dot(self.K, R), self.K.T)
+
+
 class ClockOffset:
     """Host time minus microcontroller time, changing slowly so that stamps keep the
     microcontroller's spacing, never more than `max_error` early nor `max_lag` late for longer than
@@ -189,10 +215,11 @@ class StateEstimator:
                        (resolution_z * settings.quantization_std_counts) ** 2
         r_leg = (resolution_leg * settings.quantization_std_counts) ** 2
         self.measurement_variances = np.array([r_y, r_z, r_leg])
+        self._variances = (r_y, r_z, r_leg)
         self._noise = (settings.horizontal_process_noise ** 2, settings.vertical_process_noise ** 2,
                        settings.leg_process_noise ** 2)
         self._models: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self.kf = KalmanFilter(dim_x=8, dim_z=3)
+        self.kf = _LoopKalmanFilter(dim_x=8, dim_z=3)
         self._H = np.zeros((3, 8))
         for row, column in enumerate(MEASURED):
             self._H[row, column] = 1.0
@@ -321,8 +348,9 @@ class StateEstimator:
         kf = self.kf
         values = (m.y, m.z, m.leg_angle)
         gate = self.settings.outlier_gate
-        priors = kf.x[MEASURED, 0].tolist()
-        variances = (kf.P[MEASURED, MEASURED] + self.measurement_variances).tolist()   # S = H P H' + R, diagonal
+        state, diagonal, noise = kf.x.ravel().tolist(), kf.P.diagonal().tolist(), self._variances
+        priors = [state[i] for i in MEASURED]
+        variances = [diagonal[i] + r for i, r in zip(MEASURED, noise)]   # S = H P H' + R, diagonal
         accepted = []
         for axis in range(3):
             innovation = values[axis] - priors[axis]

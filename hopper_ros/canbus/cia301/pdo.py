@@ -6,10 +6,11 @@ event timer) and TPDOs on request (RTR).
 
 from __future__ import annotations
 
-from typing import Any, Callable
+import struct
+from typing import Any, Callable, NamedTuple
 
 from hopper_ros.canbus import epos2_objects as od
-from hopper_ros.canbus.epos2_objects import DataType, SdoAbort
+from hopper_ros.canbus.epos2_objects import DATA_TYPE_FORMAT, DataType, SdoAbort
 
 from .counters import Counters
 from .sdo_server import SdoRefused
@@ -17,6 +18,18 @@ from .values import decode, encode
 
 _MS = 1.0e-3                       # [s/ms]
 _INHIBIT_UNIT = 100.0e-6           # [s] unit of the TPDO inhibit time (CiA 301)
+
+
+class _Pdo(NamedTuple):
+    """One PDO as its communication and mapping objects configure it, read once per configuration."""
+    cob: int | None                  # None: not valid
+    transmission_type: int
+    inhibit_time: float              # [s] (TPDO)
+    event_timer: float               # [s] (TPDO)
+    mapped: tuple                    # (index, subindex) of each mapped object, in order
+    entries: tuple                   # the dictionary entry of each (None: dummy mapping)
+    layout: struct.Struct | None     # the payload of the mapped values (None: a type without a fixed format)
+    length: int                      # [bytes]
 
 
 def pdo_kind(index: int) -> tuple[str, int, int, int] | None:
@@ -45,20 +58,44 @@ class PdoEngine:
 
     def reset(self) -> None:
         """Communication reset: SYNC counts, pending RPDOs and the TPDOs' last sends forgotten."""
+        self._plans: dict[int, _Pdo] = {}   # communication index -> its configuration (`_pdo`)
         self._sync_counts = [0] * od.PDO_COUNT
         self._pending_rpdos: dict[int, bytes] = {}
         self._tpdo_last_data: list[bytes | None] = [None] * od.PDO_COUNT
         self._tpdo_last_time: list[float | None] = [None] * od.PDO_COUNT
 
     def cob(self, comm_index: int) -> int | None:
-        cob = int(self._values[(comm_index, od.PDO_COB_ID_SUB)])
-        return None if cob & od.COB_ID_INVALID_BIT else cob & od.COB_ID_MASK_11BIT
+        return self._pdo(comm_index).cob
 
     def rpdo_number(self, cob: int) -> int | None:
         for n in range(od.PDO_COUNT):
-            if self.cob(od.RPDO_COMMUNICATION + n) == cob:
+            if self._pdo(od.RPDO_COMMUNICATION + n).cob == cob:
                 return n
         return None
+
+    def _pdo(self, comm_index: int) -> _Pdo:
+        """The PDO's configuration, read from the dictionary once and kept until a PDO object is written
+        (`stored`) or the communication resets: a SYNC then costs one pack or unpack per PDO."""
+        plan = self._plans.get(comm_index)
+        if plan is None:
+            v = self._values
+            raw = int(v[(comm_index, od.PDO_COB_ID_SUB)])
+            map_index = comm_index - od.RPDO_COMMUNICATION + od.RPDO_MAPPING if comm_index < od.TPDO_COMMUNICATION \
+                else comm_index - od.TPDO_COMMUNICATION + od.TPDO_MAPPING
+            mapping = self.mapping(map_index)
+            entries = tuple(self._table.get((index, sub)) for index, sub, _ in mapping)
+            formats = [DATA_TYPE_FORMAT.get(e.data_type) if e is not None else None for e in entries]
+            fixed = all(f is not None and struct.calcsize(f) * 8 == bits
+                        for f, (_, _, bits) in zip(formats, mapping))
+            plan = self._plans[comm_index] = _Pdo(
+                cob=None if raw & od.COB_ID_INVALID_BIT else raw & od.COB_ID_MASK_11BIT,
+                transmission_type=int(v[(comm_index, od.PDO_TRANSMISSION_TYPE_SUB)]),
+                inhibit_time=int(v.get((comm_index, od.PDO_INHIBIT_TIME_SUB), 0)) * _INHIBIT_UNIT,
+                event_timer=int(v.get((comm_index, od.PDO_EVENT_TIMER_SUB), 0)) * _MS,
+                mapped=tuple((index, sub) for index, sub, _ in mapping), entries=entries,
+                layout=struct.Struct("<" + "".join(f.lstrip("<") for f in formats)) if fixed else None,
+                length=sum(bits for _, _, bits in mapping) // 8)
+        return plan
 
     def mapping(self, map_index: int) -> list[tuple[int, int, int]]:
         count = int(self._values[(map_index, 0)])
@@ -69,19 +106,23 @@ class PdoEngine:
     def on_rpdo(self, n: int, data: bytes, now: float) -> None:
         if not self._operational():
             return
-        mapping = self.mapping(od.RPDO_MAPPING + n)
-        length = sum(bits for _, _, bits in mapping) // 8
-        if len(data) != length:
+        pdo = self._pdo(od.RPDO_COMMUNICATION + n)
+        if len(data) != pdo.length:
             self.counters.malformed_frames += 1
             self._raise_error(od.ERROR_PDO_LENGTH, now)
             return
-        trans = int(self._values[(od.RPDO_COMMUNICATION + n, od.PDO_TRANSMISSION_TYPE_SUB)])
-        if trans <= od.TRANSMISSION_SYNC_MAX:
+        if pdo.transmission_type <= od.TRANSMISSION_SYNC_MAX:
             self._pending_rpdos[n] = data        # applied at the next SYNC
         else:
             self._apply_rpdo(n, data)
 
     def _apply_rpdo(self, n: int, data: bytes) -> None:
+        pdo = self._pdo(od.RPDO_COMMUNICATION + n)
+        if pdo.layout is not None:
+            for entry, value in zip(pdo.entries, pdo.layout.unpack(data)):
+                self._store(entry, value)
+            self.counters.rpdos_applied += 1
+            return
         offset = 0
         for index, sub, bits in self.mapping(od.RPDO_MAPPING + n):
             size = bits // 8
@@ -104,10 +145,10 @@ class PdoEngine:
             self._apply_rpdo(n, self._pending_rpdos[n])
         self._pending_rpdos.clear()
         for n in range(od.PDO_COUNT):
-            comm = od.TPDO_COMMUNICATION + n
-            if self.cob(comm) is None:
+            pdo = self._pdo(od.TPDO_COMMUNICATION + n)
+            if pdo.cob is None:
                 continue
-            trans = int(self._values[(comm, od.PDO_TRANSMISSION_TYPE_SUB)])
+            trans = pdo.transmission_type
             if trans == od.TRANSMISSION_SYNC_ACYCLIC:
                 payload = self.tpdo_payload(n)
                 if payload != self._tpdo_last_data[n]:
@@ -121,6 +162,10 @@ class PdoEngine:
     # ---------------------------------------------------------------- TPDOs
 
     def tpdo_payload(self, n: int) -> bytes:
+        pdo = self._pdo(od.TPDO_COMMUNICATION + n)
+        if pdo.layout is not None:
+            v = self._values
+            return pdo.layout.pack(*[int(v[key]) for key in pdo.mapped])
         out = bytearray()
         for index, sub, bits in self.mapping(od.TPDO_MAPPING + n):
             entry = self._table[(index, sub)]
@@ -128,7 +173,7 @@ class PdoEngine:
         return bytes(out)
 
     def _send_tpdo(self, n: int, payload: bytes, now: float) -> None:
-        cob = self.cob(od.TPDO_COMMUNICATION + n)
+        cob = self._pdo(od.TPDO_COMMUNICATION + n).cob
         if cob is None:
             return
         self._send(cob, payload)
@@ -140,17 +185,14 @@ class PdoEngine:
         """Event-driven TPDOs (transmission type 254/255): sent when their data changed (after the
         inhibit time) or their event timer ran out. The device calls it every cycle while operational."""
         for n in range(od.PDO_COUNT):
-            comm = od.TPDO_COMMUNICATION + n
-            if self.cob(comm) is None:
-                continue
-            if int(self._values[(comm, od.PDO_TRANSMISSION_TYPE_SUB)]) < od.TRANSMISSION_EVENT_MANUFACTURER:
+            pdo = self._pdo(od.TPDO_COMMUNICATION + n)
+            if pdo.cob is None or pdo.transmission_type < od.TRANSMISSION_EVENT_MANUFACTURER:
                 continue
             last = self._tpdo_last_time[n]
-            inhibit = int(self._values[(comm, od.PDO_INHIBIT_TIME_SUB)]) * _INHIBIT_UNIT
-            if last is not None and now - last < inhibit:
+            if last is not None and now - last < pdo.inhibit_time:
                 continue
             payload = self.tpdo_payload(n)
-            timer = int(self._values[(comm, od.PDO_EVENT_TIMER_SUB)]) * _MS
+            timer = pdo.event_timer
             due = timer > 0 and (last is None or now - last >= timer)
             if payload != self._tpdo_last_data[n] or due:
                 self._send_tpdo(n, payload, now)
@@ -220,7 +262,8 @@ class PdoEngine:
         pdo = pdo_kind(index)
         if pdo is None:
             return
-        kind, _, _, n = pdo
+        kind, comm, _, n = pdo
+        self._plans.pop(comm, None)
         if kind == "TPDO":
             self._tpdo_last_data[n] = None
             self._sync_counts[n] = 0
