@@ -20,7 +20,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "bench"))
 sys.path.insert(0, str(REPO))
 
-from diagnosis_suite import diagnose_and_score, summarise  # noqa: E402
+from diagnosis_suite import diagnosed_rows, independent_line, independent_score, summarise  # noqa: E402
 
 from hopper_ros.hardware.config import load_hardware  # noqa: E402
 from hopper_ros.harness.collect import CollectionSettings, collect  # noqa: E402
@@ -100,13 +100,13 @@ def make_recording(names: list[str], folder: Path, seed: int):
 
 
 def run(names=None, verbose=True) -> dict:
-    rows = []
+    jobs = []
     for k, (name, effects) in enumerate(cases().items()):
         if names and name not in names:
             continue
         rec, truth = make_recording(effects, Path(tempfile.mkdtemp()), seed=100 + k)
-        rows.append(diagnose_and_score(name, rec, truth, verbose))
-    return summarise(rows)
+        jobs.append((name, rec, truth, independent_score))
+    return summarise(diagnosed_rows(jobs, independent_line, verbose))
 
 
 if __name__ == "__main__":

@@ -11,7 +11,10 @@ A verdict that matches no concealed effect is a false positive. Used by test_dia
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
 import sys
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
@@ -59,6 +62,10 @@ SITES = {"flight": {"flight_horizontal", "flight_vertical"},
                       "touchdown_across", "liftoff_along", "liftoff_across", "touchdown_timing"}}
 SITES["sensor_y"] = SITES["sensor_theta"] = SITES["sensor_z"]
 TOLERANCE = 0.2
+# The sweeps diagnose two recordings at a time, each in a process of its own with one numba thread: a diagnosis
+# is two thirds single-threaded Python (the search, the fits), so one at a time with two numba threads left a core
+# idle most of the time. A recording's verdict does not depend on it (the lanes are independent).
+WORKERS = 2
 
 
 def _expected(effect: dict):
@@ -121,41 +128,76 @@ def dependence_found(result, effect: dict, forms: set, used: set, tolerance: flo
     return None
 
 
-def diagnose_and_score(name: str, recording, truth: dict, verbose: bool = True) -> dict:
-    """One recording diagnosed and scored: the row of a summary."""
-    from hopper_ros.diagnosis import diagnose_file
+def independent_score(result, truth: dict) -> dict:
     from hopper_ros.diagnosis.report import location_line
     from hopper_ros.diagnosis.settings import Settings
 
     threshold = Settings().locate_threshold
+    row = score(result, truth, threshold)
+    row["location"] = location_line(result.location, threshold)
+    return row
+
+
+def independent_line(s: dict) -> str:
+    return (f"{s['name']}: {len(s['hits'])}/{s['effects']} named, false {s['false_positives']}, located "
+            f"{len(s['located'])}, {s['seconds']:.0f} s | {s['verdict']} | {s['location']}")
+
+
+def _diagnosed_row(job) -> dict:
+    """A worker's job: (name, recording, truth, score) diagnosed and scored, the row of a summary."""
+    from hopper_ros.diagnosis import diagnose_file
+
+    name, recording, truth, score_one = job
     result = diagnose_file(recording)
-    s = score(result, truth, threshold)
-    s.update(name=name, seconds=result.wall_time, verdict=result.verdict, before=result.before.as_dict(),
-             after=result.after.as_dict(), location=location_line(result.location, threshold))
-    if verbose:
-        print(f"{name}: {len(s['hits'])}/{s['effects']} named, false {s['false_positives']}, located "
-              f"{len(s['located'])}, {s['seconds']:.0f} s | {s['verdict']} | {s['location']}", flush=True)
-    return s
+    row = score_one(result, truth)
+    row.update(name=name, seconds=result.wall_time, verdict=result.verdict, before=result.before.as_dict(),
+               after=result.after.as_dict())
+    return row
+
+
+def diagnosed_rows(jobs: list, line, verbose: bool = True) -> list[dict]:
+    """Each job (name, recording, truth, score: a module-level `score(result, truth) -> row`) diagnosed and
+    scored, `WORKERS` at a time in processes of one numba thread each; `line(row)` printed as each row comes,
+    in order. The rows, in the jobs' order."""
+    if len(jobs) <= 1:
+        rows = [_diagnosed_row(job) for job in jobs]
+        for row in rows if verbose else ():
+            print(line(row), flush=True)
+        return rows
+    saved = os.environ.get("NUMBA_NUM_THREADS")
+    os.environ["NUMBA_NUM_THREADS"] = "1"          # read by each worker's numba at its import
+    try:
+        with ProcessPoolExecutor(WORKERS, mp_context=multiprocessing.get_context("spawn")) as pool:
+            rows = []
+            for row in pool.map(_diagnosed_row, jobs):
+                if verbose:
+                    print(line(row), flush=True)
+                rows.append(row)
+            return rows
+    finally:
+        if saved is None:
+            os.environ.pop("NUMBA_NUM_THREADS", None)
+        else:
+            os.environ["NUMBA_NUM_THREADS"] = saved
+
+
+def diagnose_and_score(name: str, recording, truth: dict, verbose: bool = True) -> dict:
+    """One recording diagnosed and scored: the row of a summary."""
+    return diagnosed_rows([(name, recording, truth, independent_score)], independent_line, verbose)[0]
+
+
+def _truths(folder: Path, names) -> list[tuple[str, Path, dict]]:
+    """(name, recording, truth) of each recording of `folder` (CSV + truth JSON, `names` only if given)."""
+    return [(path.stem, path.with_suffix(".csv"), json.loads(path.read_text()))
+            for path in sorted(folder.glob("*.json"))
+            if not (names and path.stem not in names or path.stem == "score")]   # (a scorer's own output)
 
 
 def score_folder(folder: Path, names, score, line, verbose: bool = True) -> list[dict]:
     """Each recording of `folder` (CSV + truth JSON, `names` only if given) diagnosed and scored by
-    `score(result, truth)`; `line(row)` is printed per recording when verbose. The rows."""
-    from hopper_ros.diagnosis import diagnose_file
-
-    rows = []
-    for truth_path in sorted(folder.glob("*.json")):
-        if names and truth_path.stem not in names or truth_path.stem == "score":   # (a scorer's own output)
-            continue
-        truth = json.loads(truth_path.read_text())
-        result = diagnose_file(truth_path.with_suffix(".csv"))
-        row = score(result, truth)
-        row.update(name=truth_path.stem, seconds=result.wall_time, verdict=result.verdict,
-                   before=result.before.as_dict(), after=result.after.as_dict())
-        if verbose:
-            print(line(row), flush=True)
-        rows.append(row)
-    return rows
+    `score(result, truth)` (module-level: it runs in the workers); `line(row)` is printed per recording when
+    verbose. The rows."""
+    return diagnosed_rows([(name, csv, truth, score) for name, csv, truth in _truths(folder, names)], line, verbose)
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -179,13 +221,7 @@ def summarise(rows: list[dict]) -> dict:
 
 def run(folder: Path, names=None, verbose=True) -> dict:
     """Diagnose every recording of `folder` (CSV + truth JSON) and sum the scores."""
-    rows = []
-    for truth_path in sorted(folder.glob("*.json")):
-        if names and truth_path.stem not in names or truth_path.stem == "score":
-            continue
-        truth = json.loads(truth_path.read_text())
-        rows.append(diagnose_and_score(truth_path.stem, truth_path.with_suffix(".csv"), truth, verbose))
-    return summarise(rows)
+    return summarise(score_folder(folder, names, independent_score, independent_line, verbose))
 
 
 def suite(score, summarise, line):
