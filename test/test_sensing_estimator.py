@@ -12,6 +12,7 @@ from scipy.linalg import expm
 from hopper_ros.hardware import packet as packet_format
 from hopper_ros.hardware.config import load_hardware
 from hopper_ros.hardware.encoders import BoomKinematics
+from hopper_ros.sensing.bridge import EncoderBridge
 from hopper_ros.harness.sensing_evaluation import flight_velocity_errors, record_experiments, replay
 from hopper_ros.physics.params import load_params
 from hopper_ros.sensing.config import load_sensing_config
@@ -278,3 +279,32 @@ def test_a_lockstep_stream_and_a_host_stall_keep_the_mapping():
     realtime = estimator()
     errors = _stamp_errors(realtime, packets)
     assert realtime.clock.anchors == 1 and max(abs(e) for _, e in errors[100:]) < 1e-3
+
+
+def test_the_loops_filter_gives_filterpys_numbers_bit_for_bit():
+    """The estimator's filter skips filterpy's bookkeeping copies (`_LoopKalmanFilter`): the same estimates as filterpy's
+    own KalmanFilter, to the last bit, over the simulated robot's samples with a gap, outliers and a restart."""
+    from filterpy.kalman import KalmanFilter
+
+    rec = recording()
+    ours, filterpys = estimator(), estimator()
+    lean = ours.kf
+    filterpys.kf = KalmanFilter(dim_x=8, dim_z=3)
+    filterpys.kf.H, filterpys.kf.R, filterpys.kf.inv = lean.H, lean.R, lean.inv
+    assert type(lean) is not KalmanFilter
+    compared = 0
+    bridge = EncoderBridge.from_config(HARDWARE, CONFIG.bridge)
+    for index, packet in enumerate(rec.packets[:4000]):
+        sample = bridge.process(packet_format.encode(packet), packet.mcu_time_us * 1e-6 + 2e-4)
+        if 1000 <= index < 1004 or sample is None:
+            continue                                           # a gap: four predictions
+        m = sample.measurement()
+        if index in (2000, 2001):
+            m = dataclasses.replace(m, z=m.z + 0.3)            # outliers, gated
+        if 3000 <= index < 3010:
+            m = dataclasses.replace(m, y=m.y + 1.0)            # a jump: the filter restarts
+        a, b = ours.update(m), filterpys.update(m)
+        assert a == b, index
+        compared += len(a)
+    assert compared > 3900 and ours.counters == filterpys.counters
+    assert ours.counters["reinitialisations"] >= 1 and ours.counters["outliers_z"] >= 2
