@@ -41,6 +41,18 @@ def sync_and_receive(network, node, pdos=(1, 2)) -> None:
         time.sleep(0.002)
 
 
+def state_after_command(node, before: str, heartbeats: int = 3) -> str:
+    """The drive's NMT state from its heartbeats after an NMT command: one sent before the drive took the command
+    (in flight, or the drive's loop a moment late under load) still says `before`, so up to `heartbeats` are read
+    until one says otherwise (the drive's heartbeat period is 0.1 s: a drive that never switches still fails)."""
+    state = node.nmt.wait_for_heartbeat(TIMEOUT)
+    for _ in range(heartbeats - 1):
+        if state != before:
+            break
+        state = node.nmt.wait_for_heartbeat(TIMEOUT)
+    return state
+
+
 def main() -> int:
     network, node = connect(sys.argv)
     try:
@@ -52,7 +64,7 @@ def main() -> int:
         node.tpdo.read()
         report("rpdo1", ",".join(v.name.replace(" ", "_") for v in node.rpdo[1].map))
         node.nmt.state = "OPERATIONAL"
-        report("heartbeat", node.nmt.wait_for_heartbeat(TIMEOUT))
+        report("heartbeat", state_after_command(node, "PRE-OPERATIONAL"))
 
         node.sdo["Modes of operation"].raw = -3       # Current Mode
         for command in (0x06, 0x07, 0x0F):            # shutdown, switch on, enable operation
