@@ -70,6 +70,16 @@ def test_compiled_and_numpy_lanes_agree_on_every_law():
     assert np.array_equal(fast.fell, slow.fell)
 
 
+def test_stack_gives_each_lane_its_variants_coefficients():
+    variants = _variants()
+    stacked = lanes.stack(variants, 3)
+    for name in laws.Coefficients.scalar_names():
+        assert np.array_equal(getattr(stacked, name), np.repeat([getattr(v, name) for v in variants], 3)), name
+    for name in laws.Coefficients.term_names():
+        for i, lane_values in enumerate(getattr(stacked, name)):
+            assert np.array_equal(lane_values, np.repeat([getattr(v, name)[i] for v in variants], 3)), (name, i)
+
+
 def test_compiled_path_is_required_when_asked(monkeypatch):
     monkeypatch.setattr(lanes, "_COMPILED", False)
     with pytest.raises(RuntimeError, match="not available"):

@@ -104,11 +104,24 @@ def quadratic_at(grid: np.ndarray, values: np.ndarray, x: float) -> np.ndarray:
 
 
 def interp_pred(grid, pred_grid: dict, values: np.ndarray) -> dict:
-    """Next-apex predictions per stride at per-stride magnitudes, interpolated on the grid."""
+    """Next-apex predictions per stride at per-stride magnitudes, interpolated on the grid (an increasing one):
+    `np.interp` per stride over its finite grid points, the same numbers; strides whose every grid point is finite
+    (nearly all) at once, with np.interp's own arithmetic."""
+    grid, values = np.asarray(grid, dtype=float), np.asarray(values, dtype=float)
+    last = len(grid) - 1
+    j = np.clip(np.searchsorted(grid, values, side="right") - 1, 0, max(last - 1, 0))   # grid[j] <= x < grid[j+1]
+    x0, x1 = grid[j], grid[np.minimum(j + 1, last)]
+    columns = np.arange(len(values))
     out = {}
     for key, arr in pred_grid.items():       # arr: (grid, strides)
-        col = np.empty(arr.shape[1])
-        for i in range(arr.shape[1]):
+        y0, y1 = arr[j, columns], arr[np.minimum(j + 1, last), columns]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            col = (y1 - y0) / (x1 - x0) * (values - x0) + y0
+        col = np.where(values == x0, y0, col)                       # on a grid point: its value
+        col = np.where(values >= grid[-1], arr[-1], np.where(values < grid[0], arr[0], col))   # beyond: the end's
+        finite = np.isfinite(arr).all(axis=0) & np.isfinite(values) & np.isfinite(col) if last >= 1 else \
+            np.zeros(len(values), bool)
+        for i in np.flatnonzero(~finite):   # a stride whose lane fell at some grid value: its finite points only
             ok = np.isfinite(arr[:, i])
             col[i] = np.interp(values[i], grid[ok], arr[ok, i]) if ok.sum() >= 2 else np.nan
         out[key] = col

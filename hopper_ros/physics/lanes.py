@@ -52,8 +52,11 @@ class LaneResult:
 
 
 def broadcast(coefficients: laws.Coefficients, n: int) -> laws.Coefficients:
-    """Every field of `coefficients` as an array of `n` lanes."""
+    """Every field of `coefficients` as an array of `n` lanes (a field that is one already, as `stack` makes them, is
+    shared: the lanes never write their coefficients)."""
     def arr(v):
+        if type(v) is np.ndarray and v.dtype == np.float64 and v.shape == (n,):
+            return v
         return np.broadcast_to(np.asarray(v, dtype=float), (n,)).copy()
     values = {}
     for name, value in coefficients.as_dict().items():
@@ -63,13 +66,16 @@ def broadcast(coefficients: laws.Coefficients, n: int) -> laws.Coefficients:
 
 def stack(variants: list[laws.Coefficients], lanes_each: int) -> laws.Coefficients:
     """One lane array per field: variant i fills lanes [i*lanes_each, (i+1)*lanes_each)."""
-    values = {}
-    for name in laws.Coefficients.scalar_names():
-        values[name] = np.repeat(np.array([float(getattr(v, name)) for v in variants]), lanes_each)
-    for name in laws.Coefficients.term_names():
-        count = len(getattr(variants[0], name))
-        values[name] = tuple(np.repeat(np.array([float(getattr(v, name)[i]) for v in variants]), lanes_each)
-                             for i in range(count))
+    scalars, terms = laws.Coefficients.scalar_names(), laws.Coefficients.term_names()
+    counts = [len(getattr(variants[0], name)) for name in terms]
+    rows = [[float(getattr(v, name)) for name in scalars]
+            + [float(x) for name in terms for x in getattr(v, name)] for v in variants]
+    table = np.repeat(np.array(rows, dtype=np.float64).T, lanes_each, axis=1)    # (fields, lanes), a row a field
+    values = {name: table[k] for k, name in enumerate(scalars)}
+    k = len(scalars)
+    for name, count in zip(terms, counts):
+        values[name] = tuple(table[k + i] for i in range(count))
+        k += count
     return laws.Coefficients(**values)
 
 
