@@ -23,7 +23,7 @@ Figures: packet_to_event_p50_us / _p99_us / _max_us (packet sent -> its event pu
 detector, from the event's stamp + detection_delay, both host wall clock, against the source's
 wall clock at sendto; target p99 < 1000 us), packet_to_event_received_p50_us / _p99_us (the same
 to the sink's callback: one more hop), deadline_miss_pct (the event detector's late_samples over
-its samples: states that reached it more than sensing.yaml's sample_deadline, 1 ms, after their
+its samples: states that reached it more than sensing.yaml's sample_deadline (0: the sample period, 1 ms) after their
 sample's instant, i.e. the packet's earliest arrival; from its diagnostics, so that no 1 kHz
 listener loads the machine), events_measured,
 sensing_source_rate_hz. 40 s of packets (quick: 5 s). The same (20 s) with normal scheduling:

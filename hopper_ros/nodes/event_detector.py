@@ -8,12 +8,15 @@ it) and each apex also on `apex` (ApexState: height, forward speed, y, leg angle
 opens stride n), which stride_predictor and setpoint_scheduler consume. `/diagnostics`
 (DiagnosticArray, every `diagnostics_period`): counters (samples, untrusted_samples, track_lost,
 track_acquired, strides, one per event type, late_samples: states that arrived more than
-`sample_deadline` after their sample's instant, i.e. the loop's missed deadlines) and values
-(detection_delay_max_s, sample_age_max_s and process_time_max_s over the period).
+`sample_deadline` after their sample's instant, i.e. the loop's missed deadlines; 0 there: the hardware file's
+sample period, the loop's own) and values (detection_delay_max_s, sample_age_max_s and process_time_max_s over the
+period).
 
 Parameters (read only):
   sensing_file (string): default `sensing.yaml` (config/sensing.yaml, section detector)
   model_file (string): rho_0, k, d, g, flight damping ("" = the sensing file's, model.yaml)
+  hardware_file (string): the microcontroller's sample period, the deadline where the sensing file's is 0
+    ("" = the sensing file's)
   diagnostics_period (double) [s]: 0 = sensing file's
 
 The logic lives in hopper_ros.sensing.events; this node only connects it to ROS.
@@ -28,6 +31,7 @@ from rclpy.node import Node
 from hopper_ros.msg import ApexState, BodyState, GaitEvent
 from hopper_ros.nodes.common import run_node, sensing_parameters
 from hopper_ros.config.schemas import load_model
+from hopper_ros.hardware.config import load_hardware
 from hopper_ros.nodes.diagnostics import DiagnosticsReporter
 from hopper_ros.sensing.events import EventDetector
 from hopper_ros.nodes.sensing_messages import (CounterDeltas, any_of, apex_state_msg,
@@ -52,7 +56,10 @@ class EventDetectorNode(Node):
         self._deltas = CounterDeltas()
         self._delay_max = 0.0
         self._process_time_max = 0.0
-        self._deadline = config.detector.sample_deadline
+        hardware_file = param("hardware_file", "", "hardware (YAML), '' = the sensing file's: its sample period is "
+                              "the deadline where the sensing file's is 0") or config.hardware_file
+        self._deadline = (config.detector.sample_deadline
+                          or load_hardware(hardware_file).microcontroller.sample_period)
         self.late_samples = 0
         self._age_max = 0.0
         s = config.detector
