@@ -184,7 +184,7 @@ def test_show_args_and_print(hopper_cli):
     lines = dict(line.split(": ", 1) for line in normal.stdout.splitlines())
     assert "-p period:=0.002 -p hardware_file:=demo/hardware_500hz.yaml" in lines["sim_robot"], lines["sim_robot"]
     assert "-p config_file:=demo/motor_driver_500hz.yaml -p sync_period:=0.002" in lines["motor_driver"]
-    assert lines["sensing"].count("hardware_file:=demo/hardware_500hz.yaml") == 2, lines["sensing"]
+    assert lines["sensing"].count("hardware_file:=demo/hardware_500hz.yaml") == 3, lines["sensing"]   # bridge, estimator, detector
     printed = hopper_cli("launch", "demo_500hz.launch.yaml", "--print")
     assert printed.wait() == 0
     assert [line.split(":")[0] for line in printed.stdout.splitlines()] == [
