@@ -119,8 +119,7 @@ def interp_pred(grid, pred_grid: dict, values: np.ndarray) -> dict:
             col = (y1 - y0) / (x1 - x0) * (values - x0) + y0
         col = np.where(values == x0, y0, col)                       # on a grid point: its value
         col = np.where(values >= grid[-1], arr[-1], np.where(values < grid[0], arr[0], col))   # beyond: the end's
-        finite = np.isfinite(arr).all(axis=0) & np.isfinite(values) & np.isfinite(col) if last >= 1 else \
-            np.zeros(len(values), bool)
+        finite = np.isfinite(arr).all(axis=0) & np.isfinite(values) & np.isfinite(col) & (last >= 1)
         for i in np.flatnonzero(~finite):   # a stride whose lane fell at some grid value: its finite points only
             ok = np.isfinite(arr[:, i])
             col[i] = np.interp(values[i], grid[ok], arr[ok, i]) if ok.sum() >= 2 else np.nan
