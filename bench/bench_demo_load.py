@@ -10,7 +10,7 @@ for 60-150 ms every 2-4 s):
 (--quick: 1 and 1.) Each on a ROS domain of its own. Per run, from the demo's strides.csv and
 health.json (the nodes' diagnostics from the throw on, hopper_ros/cli/demo.py): a fall, the largest
 |apex error| past each setpoint's first stride, the states that reached the event detector more
-than 1 ms after their sample, the stance ramps the controller cancelled, the stances in which the
+than a sample period after their sample (1 ms; 2 ms at 500 Hz), the stance ramps the controller cancelled, the stances in which the
 leg felt no ramp torque or felt it more than 5 ms after the touchdown (hopper_ros/sim/stance.py),
 the ramps that reached the driver after their start and by how much, the predicted touchdowns
 against the measured (both on the robot's clock), the motor command stream's gaps at the driver (p99 over the run, the longest), its watchdog
