@@ -34,13 +34,16 @@ class DriveThread:
         self.actions: queue.Queue = queue.Queue()       # run in the drive's thread (it is single-threaded)
         self.controlwords: list[int] = []
         self._stop = threading.Event()
+        self.longest_stall = 0.0                        # [s] the longest gap between two turns of its loop
         self._thread = threading.Thread(target=self._serve, daemon=True)
         self._thread.start()
 
     def _serve(self) -> None:
         drive = self.drive
+        last = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
+            self.longest_stall, last = max(self.longest_stall, now - last), now
             while not self.actions.empty():
                 self.actions.get()(now)
             drive.poll(now)
@@ -55,7 +58,9 @@ class DriveThread:
     def wait_for(self, condition, timeout: float = SAFETY_TIMEOUT) -> None:
         end = time.monotonic() + timeout
         while not condition():
-            assert time.monotonic() < end, f"drive: {self.drive.state}, NMT {self.drive.nmt_state}"
+            assert time.monotonic() < end, (f"drive: {self.drive.state}, NMT {self.drive.nmt_state}, error "
+                                            f"0x{self.drive.value(eo.ERROR_CODE, 0):04X}, its thread stalled up to "
+                                            f"{self.longest_stall * 1e3:.0f} ms")
             time.sleep(0.005)
 
     def stop(self) -> None:
