@@ -34,19 +34,23 @@ def test_late_states_watchdog_stops_and_stalls_each_say_why():
 
 
 @pytest.mark.parametrize("hardware_file, late", [("hardware.yaml", 2), ("demo/hardware_500hz.yaml", 1)])
-def test_a_state_is_late_after_the_loops_own_period(rclpy_session, hardware_file, late):
+def test_a_state_is_late_after_the_loops_own_period(rclpy_session, monkeypatch, hardware_file, late):
     """The detector's deadline is the sample period of its hardware file (config/sensing.yaml sample_deadline 0): 1 ms
     at 1 kHz, 2 ms for the demo at 500 Hz, where a 1 ms deadline counted most states of a loop that kept its rate
     late (34-90 % in the 500 Hz demos of 2026-11-28)."""
+    from types import SimpleNamespace
+
     from hopper_ros.msg import BodyState
-    from hopper_ros.nodes.event_detector import EventDetectorNode
+    from hopper_ros.nodes import event_detector
     from hopper_ros.nodes.stamps import to_stamp
 
-    node = EventDetectorNode(cli_args=["--ros-args", "-p", f"hardware_file:={hardware_file}"])
+    node = event_detector.EventDetectorNode(cli_args=["--ros-args", "-p", f"hardware_file:={hardware_file}"])
+    now = 1.8e9        # the node's host clock held still: each state's age is what the stamp says, whatever the load
+    monkeypatch.setattr(event_detector, "time", SimpleNamespace(time=lambda: now, perf_counter=time.perf_counter))
     try:
         for age in (0.0002, 0.0015, 0.004):      # on time; within 2 ms; past both
             msg = BodyState()
-            msg.header.stamp = to_stamp(time.time() - age)
+            msg.header.stamp = to_stamp(now - age)
             node._on_state(msg)
         assert node.late_samples == late
     finally:
