@@ -265,6 +265,12 @@ class LoadClient:
         self.start_phase(name, seconds)
         return self.result()
 
+    def abort(self) -> None:
+        """End it now, mid-phase or not (its figures unread)."""
+        if self.child.poll() is None:
+            self.child.kill()
+            self.child.wait(TIMEOUT)
+
     def close(self) -> None:
         if self.child.poll() is None:
             try:
