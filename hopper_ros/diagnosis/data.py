@@ -168,6 +168,8 @@ class StrideData:
     simulated: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     located: dict = field(default_factory=dict, init=False, repr=False, compare=False)   # ... (locate.locate)
     swing: dict = field(default_factory=dict, init=False, repr=False, compare=False)     # ... (swing.geometry)
+    # the strides' indices -> that subset of this data, made once so that its simulations are kept (`search.screen`)
+    subsets: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __repr__(self) -> str:
         return f"StrideData({self.rec.source}, {len(self.strides)} strides)"

@@ -198,8 +198,10 @@ class Search:
         if len(candidates) <= settings.screen:
             return candidates
         index = np.linspace(0, n - 1, min(n, settings.screen_strides)).round().astype(int)
-        subset = Search(dataclasses.replace(self.data, strides=self.data.strides.subset(index)), self.base,
-                        dataclasses.replace(settings, grid=5), self.progress)
+        subsets = self.data.subsets     # a later screen on the same strides finds the variants simulated
+        if tuple(index) not in subsets:
+            subsets[tuple(index)] = dataclasses.replace(self.data, strides=self.data.strides.subset(index))
+        subset = Search(subsets[tuple(index)], self.base, dataclasses.replace(settings, grid=5), self.progress)
         ranked = subset.rank(stack, candidates, subset.reference(stack))
         # the best grid point counts too: an SSE that is not parabolic in the magnitude (a torque limit) has a
         # vertex far from its minimum on a coarse grid
