@@ -265,6 +265,9 @@ class Deadbeat(Section):
     adaptation_gain: float = Field(ge=0, le=1)
     max_bias_height: float = unit("m", ge=0)
     max_bias_speed: float = unit("m/s", ge=0)
+    adaptation_outlier: float = Field(ge=0)
+    adaptation_floor_height: float = unit("m", ge=0)
+    adaptation_floor_speed: float = unit("m/s", ge=0)
 
     @model_validator(mode="after")
     def _ranges(self):
