@@ -357,7 +357,7 @@ class DeadbeatController:
         """The model's error off the bias, each part clipped at `adaptation_outlier` times its typical size (the
         median over the last OUTLIER_WINDOW strides, at least its floor; from OUTLIER_MIN strides on): a stride
         that did not run as the model runs (its ramp late behind a stalled loop, a slip, a push) moves the bias
-        by a typical error at most, where learned whole it came back as an error of half its size, the other way,
+        by a few typical errors at most, where learned whole it came back as an error of half its size, the other way,
         in the next stride (make demo at 500 Hz: +1.06 cm, then -0.66 cm). A lasting change is still learned:
         its errors become the typical ones within a few strides."""
         s, recent = self.settings, self._innovations
