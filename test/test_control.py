@@ -267,7 +267,7 @@ def _learn(ctl, model_errors: list[float]) -> list[float]:
     return biases
 
 
-def test_a_stride_that_did_not_run_as_decided_moves_the_bias_by_a_typical_error_at_most():
+def test_a_stride_that_did_not_run_as_decided_moves_the_bias_by_a_few_typical_errors_at_most():
     """make demo at 500 Hz: a stride whose ramp came late behind a stalled loop ended 1.06 cm high, and
     learned whole, its error came back the other way in the next stride (-0.66 cm). A lasting change is
     still learned."""
