@@ -55,12 +55,15 @@ class DriveThread:
                         self.controlwords.append(controlword)
             time.sleep(0.0005)
 
+    def describe(self) -> str:
+        """The drive's state and error code and how long its thread stalled at most (for a failed check)."""
+        return (f"drive: {self.drive.state}, NMT {self.drive.nmt_state}, error 0x{self.drive.value(eo.ERROR_CODE, 0):04X}, "
+                f"its thread stalled up to {self.longest_stall * 1e3:.0f} ms")
+
     def wait_for(self, condition, timeout: float = SAFETY_TIMEOUT) -> None:
-        end = time.monotonic() + timeout
+        end = time.monotonic() + timeout        # a hang guard
         while not condition():
-            assert time.monotonic() < end, (f"drive: {self.drive.state}, NMT {self.drive.nmt_state}, error "
-                                            f"0x{self.drive.value(eo.ERROR_CODE, 0):04X}, its thread stalled up to "
-                                            f"{self.longest_stall * 1e3:.0f} ms")
+            assert time.monotonic() < end, self.describe()
             time.sleep(0.005)
 
     def stop(self) -> None:
@@ -202,9 +205,7 @@ def test_node_drives_the_epos2_reports_and_stops_safely_on_sigterm(rclpy_session
         assert drive.drive.state is State.SWITCH_ON_DISABLED and drive.drive.demand == 0.0, (
             # a fault here has been seen once under make test's load: say which (0x8130: the master's heartbeat
             # missed for the consumer's 1 s) and how long the drive's thread stalled
-            f"drive {drive.drive.state}, error 0x{drive.drive.value(eo.ERROR_CODE, 0):04X}, its thread stalled up to "
-            f"{drive.longest_stall * 1e3:.0f} ms; the node said: "
-            + " | ".join(line for line in process.stderr.splitlines() if "EMCY" in line or "heartbeat" in line))
+            drive.describe() + "; the node said: " + " | ".join(line for line in process.stderr.splitlines() if "EMCY" in line or "heartbeat" in line))
         drive.wait_for(lambda: drive.drive.nmt_state == NmtState.PRE_OPERATIONAL, 2.0)
         assert drive.drive.value(eo.CONSUMER_HEARTBEAT_TIME, 1) == 0
         assert "drive disabled (confirmed by the drive)" in process.stderr
