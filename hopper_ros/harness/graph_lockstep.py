@@ -22,6 +22,7 @@ its priority, the repeating thread above it on time. `GraphRun.stances` is the s
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
@@ -67,7 +68,10 @@ class GraphLockstep:
         self._drive_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self._master_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self.robot = SimRobot(sim_config, hardware, drive=Epos2Emulator(self._drive_bus, hardware))
-        self.driver = MotorDriver(self._master_bus, hardware, driver_settings or DriverSettings(), clock=self._now)
+        # one SYNC per period of the robot, as the demo's launch files give the driver (sync_period: period): a
+        # driver that took its SYNC period for 1 ms at 500 Hz averaged its ramp over half the period it is held
+        settings = dataclasses.replace(driver_settings or DriverSettings(), sync_period=self.robot.period)
+        self.driver = MotorDriver(self._master_bus, hardware, settings, clock=self._now)
         self.sensing = SensingPipeline.from_files(hardware=hardware)
         self.controller = controller
         self.policy = StridePolicy(controller, stride_settings or StrideSettings())
