@@ -103,6 +103,18 @@ def test_the_500hz_graph_hops_as_closely_as_the_1khz_one():
     assert half_rate < 1.5 * full_rate, (half_rate, full_rate)
 
 
+def test_a_robot_running_late_through_a_touchdown_keeps_its_ramp_where_it_touches_down():
+    """The simulated robot runs 5 ms behind for 20 ms from just before a pre-touchdown event (its process
+    starved, not stopped: it catches up, its drive taking the queued SYNC periods one a step, so it feels each
+    setting at the instant it was meant for). The sensing clock took its late packets for a stand-still and
+    re-anchored by 5 ms (clock_max_error was 1 ms): the measured touchdown, stamped on that mapping, moved the
+    ramp 5 ms off the touchdown the driver's own timeline had right (0.84 cm). Lateness below the shortest
+    stand-still (clock_max_error) moves no stamp now."""
+    graph, run = run_graph(lambda t: 0.005 if 2.02 <= t < 2.04 else 0.0)
+    assert_hops_as_unloaded(graph, run)
+    assert graph.policy.prediction_early_max < 0.001 and graph.sensing.estimator.clock.anchors == 1
+
+
 @pytest.mark.parametrize("skip_at", [1.0, 1.1, 1.2, 1.3])
 def test_the_simulated_robot_skipping_time_in_flight(skip_at):
     """Cause 1: the simulated robot stalled beyond RESYNC_AFTER skips the time it missed: from then on

@@ -77,6 +77,7 @@ class GraphLockstep:
         self.policy = StridePolicy(controller, stride_settings or StrideSettings())
         self.host_delay = host_delay
         self._catching_up = False
+        self._behind_base = 0.0       # [s] host minus robot time once the world stood still (not running behind)
 
     def _now(self) -> float:
         return self.host_time
@@ -103,7 +104,10 @@ class GraphLockstep:
         period = self.robot.period
         arrival = max(self.host_time, sample.truth.t + self.host_delay(sample.truth.t))
         gap = arrival - self.host_time
-        self._catching_up = gap < 0.5 * period           # samples in a burst: the robot runs behind
+        # the robot runs behind when its samples come in a burst, or more than a period after their time (sim/runner.py's
+        # `late > period`): its drive then takes one SYNC period of frames a step, not the frames sent for its future
+        behind = arrival - sample.truth.t - self._behind_base
+        self._catching_up = gap < 0.5 * period or behind > period
         if gap > 1.5 * period:
             # the simulated robot's process stalled: the graph runs on without samples, the controller
             # repeating its command, the driver sending SYNC to a drive that does not answer
@@ -113,6 +117,7 @@ class GraphLockstep:
                 self._cycle()
             if gap > RESYNC_AFTER:                       # beyond it the world stood still (sim/runner.py):
                 self.robot.drive.discard_syncs(gap - period)   #   its SYNCs are never answered
+                self._behind_base = arrival - sample.truth.t   #   and it goes on from then, behind no more
             else:                                        # a shorter stall is caught up, a SYNC period a step
                 self._catching_up = True
         self.host_time = arrival
