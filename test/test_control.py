@@ -78,6 +78,41 @@ def test_infeasible_strides_fall_back_safely_and_say_why():
     assert unreachable.reason in ("torque limit", "height out of reach")
 
 
+# the apexes (estimated height [m], forward speed [m/s]) of a `make demo` run at 500 Hz beside bench_demo_load's
+# load that fell: a late stance ramp left apex 11 slow, the step to 0.42 m asked for more than 12 N m, and the
+# decision at apex 12 threw the robot to 0.23 m (theta 0.155 rad, "height out of reach"); it fell a stride later
+DEMO_UNDER_LOAD_APEXES = [(0.3898, 1.9991), (0.3881, 1.9807), (0.3873, 2.0253), (0.3916, 1.9715), (0.3896, 2.1663),
+                          (0.3911, 1.942), (0.389, 1.9705), (0.3891, 2.0861), (0.3729, 2.0791), (0.3946, 1.8904),
+                          (0.3937, 1.802), (0.4412, 1.3088)]
+
+
+def test_a_step_beyond_the_torque_limit_keeps_the_height_and_hops_on_forwards():
+    ctl = controller()
+    ctl.prime(0.39, 2.0)
+    for index, (height, speed) in enumerate(DEMO_UNDER_LOAD_APEXES, start=1):
+        ctl.observe(height, speed)
+        decision = ctl.decide(height, speed, 0.39 if index <= 10 else 0.42, 2.0, index)
+    assert decision.feasible and decision.tau_0 == SETTINGS.max_torque and decision.reason == "torque limit"
+    stride = predict_stride(ctl.params, *DEMO_UNDER_LOAD_APEXES[-1], decision.touchdown_angle, decision.tau_0,
+                            decision.ramp_duration)
+    assert stride.ok and stride.next_apex_height == pytest.approx(0.42, abs=0.01) and stride.next_forward_speed > 0.5
+
+
+@pytest.mark.parametrize("warm_angle", [0.45, 0.5, 0.6])
+def test_past_the_fold_of_the_height_map_the_stride_that_runs_forwards_is_taken(warm_angle):
+    """At the torque limit z'(theta) = z* twice: before its fold and after it, where the robot is thrown
+    back (and with the torque clipped the energy does not tell them apart). Stage 1 starting near the
+    second one (its warm start from the last stride) must not lead the stride there."""
+    ctl = controller(adaptation=False)
+    ctl.prime(0.39, 2.0)
+    ctl._warm_angle, ctl._jacobian = warm_angle, None
+    decision = ctl.decide(0.441, 1.309, 0.42, 2.0)
+    assert decision.feasible and decision.tau_0 == SETTINGS.max_torque
+    stride = predict_stride(ctl.params, 0.441, 1.309, decision.touchdown_angle, decision.tau_0, decision.ramp_duration)
+    assert stride.ok and stride.next_apex_height == pytest.approx(0.42, abs=0.002)
+    assert stride.next_forward_speed > 1.0       # the other crossing: -0.43 m/s
+
+
 @pytest.mark.parametrize("adaptation", [True, False])
 def test_closed_loop_follows_the_fig_5_5_schedule(adaptation):
     records = run_closed_loop(controller(adaptation=adaptation), load_sim_config(), HARDWARE, FIG_5_5)

@@ -47,6 +47,7 @@ ANGLE_STEP = 1e-3           # [rad] finite-difference steps of the Jacobian
 TORQUE_STEP = 0.05          # [N m]
 MAX_ANGLE_STEP = 0.1        # [rad] Newton step limits
 MAX_TORQUE_STEP = 3.0       # [N m]
+SCAN_POINTS = 49            # touchdown angles of stage 2's last resort (`_scan`): 1 deg apart over 2-50 deg
 
 
 @dataclass(frozen=True)
@@ -175,16 +176,27 @@ class DeadbeatController:
     def refine(self, first: StrideDecision, apex_height: float, forward_speed: float) -> StrideDecision:
         """Stage 2, during the flight (~1 ms): the inversion on the configured predictor (corrected
         AAS by default), one batched call around stage 1's inputs; also updates the defect that
-        stage 1 uses next time."""
-        if not first.feasible or self.settings.predictor == "aas":
+        stage 1 uses next time. Where stage 1 found nothing or the grid around it holds no stride
+        that reaches z* on the setpoint's energy, or only one that runs the wrong way (Newton led
+        astray: a stale Jacobian, the fold of z'(theta) near the torque limit), every touchdown angle is
+        scanned once (`_scan`, ~2.5 ms) before a stride is given up or one aimed off the target taken."""
+        s = self.settings
+        if s.predictor == "aas" and first.feasible:
             return first
         started = time.perf_counter()
         bias = first.bias
         aim_height, aim_speed = first.target_height - bias[0], first.target_speed - bias[1]
-        solved = self._solve(apex_height, forward_speed, aim_height, aim_speed, first.touchdown_angle, first.tau_0)
-        if solved is not None and (solved[-1] == "outside" or abs(solved[0] - first.tau_0) > 1.5 * self.settings.torque_step):
-            # the solution left the grid (angle) or its linear range (torque): once more around it
-            solved = self._solve(apex_height, forward_speed, aim_height, aim_speed, solved[1], solved[0])
+        solved = None
+        if first.feasible:
+            solved = self._solve(apex_height, forward_speed, aim_height, aim_speed, first.touchdown_angle, first.tau_0)
+            if solved is not None and (solved[-1] == "outside" or abs(solved[0] - first.tau_0) > 1.5 * s.torque_step):
+                # the solution left the grid (angle) or its linear range (torque): once more around it
+                solved = self._solve(apex_height, forward_speed, aim_height, aim_speed, solved[1], solved[0])
+        if solved is None or solved[-1] != "" or solved[4] * aim_speed < 0.0:
+            scanned = self._scan(apex_height, forward_speed, aim_height, aim_speed,
+                                 first.tau_0 if first.feasible else self._warm_torque)
+            if scanned is not None and (solved is None or _better(scanned, solved, aim_height, aim_speed)):
+                solved = scanned
         if solved is None:
             return first
         result = self._decision(first.stride_index, solved, first.target_height, first.target_speed, bias, forward_speed)
@@ -197,6 +209,22 @@ class DeadbeatController:
         result.compute_time = time.perf_counter() - started
         self._pending = result
         return result
+
+    def _scan(self, apex_height, forward_speed, aim_height, aim_speed, warm_torque):
+        """The inversion over every touchdown angle (SCAN_POINTS from min_angle to max_angle), then on
+        the ordinary grid around what it found, until the torque is within the grid's linear range
+        (the scan's torques may be far from the one it needs): stage 2's last resort.
+        (tau_0, theta, t_f, z, v, stride_time, status) or None."""
+        s = self.settings
+        found = self._solve(apex_height, forward_speed, aim_height, aim_speed, 0.5 * (s.min_angle + s.max_angle),
+                            warm_torque, angles=np.linspace(s.min_angle, s.max_angle, SCAN_POINTS))
+        torque = warm_torque
+        for _ in range(3):
+            if found is None or (found[-1] != "outside" and abs(found[0] - torque) <= 1.5 * s.torque_step):
+                break
+            torque = found[0]
+            found = self._solve(apex_height, forward_speed, aim_height, aim_speed, found[1], torque) or found
+        return found
 
     def _newton(self, apex_height, forward_speed, aim_height, aim_speed, angle, torque, evaluated=None):
         """Stage 1's solve of z'(theta, tau_0) = z*, E'(theta, tau_0) = E* on the scalar AAS.
@@ -270,10 +298,12 @@ class DeadbeatController:
             status = "height out of reach"
         return (torque, angle, r.ramp_duration, r.next_apex_height, r.next_forward_speed, r.stride_time, status)
 
-    def _solve(self, apex_height, forward_speed, aim_height, aim_speed, center, warm_torque):
-        """One batched predictor call; (tau_0, theta, t_f, z, v, stride_time, status) or None."""
+    def _solve(self, apex_height, forward_speed, aim_height, aim_speed, center, warm_torque, angles=None):
+        """One batched predictor call over `angles` (default: the grid of `angle_span` around `center`);
+        (tau_0, theta, t_f, z, v, stride_time, status) or None."""
         s, p = self.settings, self.params
-        angles = np.clip(center + np.linspace(-s.angle_span, s.angle_span, s.angle_points), s.min_angle, s.max_angle)
+        if angles is None:
+            angles = np.clip(center + np.linspace(-s.angle_span, s.angle_span, s.angle_points), s.min_angle, s.max_angle)
         low = min(max(warm_torque - 0.5 * s.torque_step, s.min_torque), s.max_torque - s.torque_step)
         torques = np.array([low, low + s.torque_step])
         theta = np.tile(angles, 2)
@@ -304,16 +334,23 @@ class DeadbeatController:
         if not usable.any():
             return None
         # (5.6): the angle where the predicted height crosses z*; among the crossings, those whose
-        # energy balance needs no torque clipping first, then the one nearest the warm start
+        # energy balance needs no torque clipping first, then the one whose speed is nearest y'*.
+        # z'(theta) has a fold: past it a second crossing throws the robot back (v' < 0; with the
+        # torque clipped the energy no longer tells them apart), which the nearest to the warm start
+        # could be (a demo under load: theta 0.70 rad, the robot hopped backwards and fell)
         clipped = tau_needed != tau_used
         crossings = [i for i in range(n - 1) if usable[i] and usable[i + 1] and miss[i] * miss[i + 1] <= 0.0]
         if crossings:
-            i = min(crossings, key=lambda j: (bool(clipped[j] or clipped[j + 1]), abs(angles[j] - center)))
+            i = min(crossings, key=lambda j: (bool(clipped[j] or clipped[j + 1]),
+                                              abs(speed[j] - aim_speed) + abs(speed[j + 1] - aim_speed)))
             w = miss[i] / (miss[i] - miss[i + 1]) if miss[i] != miss[i + 1] else 0.0
             pick = lambda a: float(a[i] + w * (a[i + 1] - a[i]))  # noqa: E731
             status = "torque limit" if (clipped[i] or clipped[i + 1]) else ""
             return (pick(tau_used), pick(angles), pick(ramp), pick(height), pick(speed), pick(stride_time), status)
-        best = int(np.nanargmin(np.where(usable, np.abs(miss), np.nan)))
+        # none reaches z*: the nearest height among the strides that go the setpoint's way, if any do
+        wrong_way = usable & (speed * aim_speed < 0.0)
+        candidates = usable & ~wrong_way if (usable & ~wrong_way).any() else usable
+        best = int(np.nanargmin(np.where(candidates, np.abs(miss), np.nan)))
         at_edge = best in (0, n - 1) and s.min_angle < angles[best] < s.max_angle
         status = "outside" if at_edge else "height out of reach"
         return (float(tau_used[best]), float(angles[best]), float(ramp[best]), float(height[best]),
@@ -367,6 +404,15 @@ class DeadbeatController:
         bound_height = s.adaptation_outlier * max(float(np.median([h for h, _ in recent])), s.adaptation_floor_height)
         bound_speed = s.adaptation_outlier * max(float(np.median([v for _, v in recent])), s.adaptation_floor_speed)
         return _clip(height, bound_height), _clip(speed, bound_speed)
+
+
+def _better(one, other, aim_height, aim_speed) -> bool:
+    """Is solution `one` better than `other` (tuples of `_solve`)? A stride reaching z* beats one that does
+    not; then the smaller height miss, the smaller speed miss."""
+    def rank(solved):
+        reaches = solved[-1] in ("", "torque limit")
+        return (not reaches, 0.0 if reaches else abs(solved[3] - aim_height), abs(solved[4] - aim_speed))
+    return rank(one) < rank(other)
 
 
 OUTLIER_WINDOW = 8      # strides whose errors set the typical size (`DeadbeatController._robust`)
