@@ -177,9 +177,9 @@ class DeadbeatController:
         """Stage 2, during the flight (~1 ms): the inversion on the configured predictor (corrected
         AAS by default), one batched call around stage 1's inputs; also updates the defect that
         stage 1 uses next time. Where stage 1 found nothing or the grid around it holds no stride
-        that reaches z* on the setpoint's energy, or only one that runs the wrong way (Newton led
-        astray: a stale Jacobian, the fold of z'(theta) near the torque limit), every touchdown angle is
-        scanned once (`_scan`, ~2.5 ms) before a stride is given up or one aimed off the target taken."""
+        that reaches z*, or only one past the fold of z'(theta) or that runs the wrong way (Newton led
+        astray: a stale Jacobian, the fold near the torque limit), every touchdown angle is scanned
+        once (`_scan`, ~2.5 ms) before a stride is given up or one aimed off the target taken."""
         s = self.settings
         if s.predictor == "aas" and first.feasible:
             return first
@@ -192,7 +192,7 @@ class DeadbeatController:
             if solved is not None and (solved[-1] == "outside" or abs(solved[0] - first.tau_0) > 1.5 * s.torque_step):
                 # the solution left the grid (angle) or its linear range (torque): once more around it
                 solved = self._solve(apex_height, forward_speed, aim_height, aim_speed, solved[1], solved[0])
-        if solved is None or solved[-1] != "" or solved[4] * aim_speed < 0.0:
+        if solved is None or solved[-1] not in ("", "torque limit") or solved[4] * aim_speed < 0.0:
             scanned = self._scan(apex_height, forward_speed, aim_height, aim_speed,
                                  first.tau_0 if first.feasible else self._warm_torque)
             if scanned is not None and (solved is None or _better(scanned, solved, aim_height, aim_speed)):
@@ -346,6 +346,8 @@ class DeadbeatController:
             w = miss[i] / (miss[i] - miss[i + 1]) if miss[i] != miss[i + 1] else 0.0
             pick = lambda a: float(a[i] + w * (a[i + 1] - a[i]))  # noqa: E731
             status = "torque limit" if (clipped[i] or clipped[i + 1]) else ""
+            if status and miss[i] > miss[i + 1]:      # z' falls with theta here: past the fold
+                status = "past the fold"
             return (pick(tau_used), pick(angles), pick(ramp), pick(height), pick(speed), pick(stride_time), status)
         # none reaches z*: the nearest height among the strides that go the setpoint's way, if any do
         wrong_way = usable & (speed * aim_speed < 0.0)
@@ -364,6 +366,8 @@ class DeadbeatController:
         tau_0, angle, ramp, height, speed, stride_time, status = solved
         if status == "outside":
             status = "height out of reach"
+        elif status == "past the fold":
+            status = "torque limit"
         self._warm_angle, self._warm_torque = angle, tau_0
         return StrideDecision(stride_index, True, status, tau_0, angle, ramp, height + bias[0], speed + bias[1],
                               stride_time, target_height, target_speed, height, speed, bias=bias)
@@ -410,7 +414,7 @@ def _better(one, other, aim_height, aim_speed) -> bool:
     """Is solution `one` better than `other` (tuples of `_solve`)? A stride reaching z* beats one that does
     not; then the smaller height miss, the smaller speed miss."""
     def rank(solved):
-        reaches = solved[-1] in ("", "torque limit")
+        reaches = solved[-1] in ("", "torque limit", "past the fold")
         return (not reaches, 0.0 if reaches else abs(solved[3] - aim_height), abs(solved[4] - aim_speed))
     return rank(one) < rank(other)
 
