@@ -80,13 +80,17 @@ def test_infeasible_strides_fall_back_safely_and_say_why():
 
 # the apexes (estimated height [m], forward speed [m/s]) of a `make demo` run at 500 Hz beside bench_demo_load's
 # load that fell: a late stance ramp left apex 11 slow, the step to 0.42 m asked for more than 12 N m, and the
-# decision at apex 12 threw the robot to 0.23 m (theta 0.155 rad, "height out of reach"); it fell a stride later
+# decision at apex 12 threw the robot to 0.23 m (theta 0.155 rad, "height out of reach"); it fell a stride later.
+# In another run the crossing past the fold (theta 0.70 rad) reversed it.
 DEMO_UNDER_LOAD_APEXES = [(0.3898, 1.9991), (0.3881, 1.9807), (0.3873, 2.0253), (0.3916, 1.9715), (0.3896, 2.1663),
                           (0.3911, 1.942), (0.389, 1.9705), (0.3891, 2.0861), (0.3729, 2.0791), (0.3946, 1.8904),
                           (0.3937, 1.802), (0.4412, 1.3088)]
 
 
-def test_a_step_beyond_the_torque_limit_keeps_the_height_and_hops_on_forwards():
+def test_the_decision_that_threw_the_robot_down_now_keeps_it_hopping():
+    """The demo's apexes replayed through the controller as its node runs it (observe, then decide): at
+    apex 12 the setpoint's energy is out of the torque's reach; the stride taken must go forwards and
+    stay above min_apex_height (the model's own prediction checked), not be thrown to 0.23 m."""
     ctl = controller()
     ctl.prime(0.39, 2.0)
     for index, (height, speed) in enumerate(DEMO_UNDER_LOAD_APEXES, start=1):
@@ -95,22 +99,36 @@ def test_a_step_beyond_the_torque_limit_keeps_the_height_and_hops_on_forwards():
     assert decision.feasible and decision.tau_0 == SETTINGS.max_torque and decision.reason == "torque limit"
     stride = predict_stride(ctl.params, *DEMO_UNDER_LOAD_APEXES[-1], decision.touchdown_angle, decision.tau_0,
                             decision.ramp_duration)
-    assert stride.ok and stride.next_apex_height == pytest.approx(0.42, abs=0.01) and stride.next_forward_speed > 0.5
+    assert stride.ok and stride.next_apex_height >= SETTINGS.min_apex_height and stride.next_forward_speed > 1.5
+
+
+@pytest.mark.parametrize("start, setpoint", [((0.4412, 1.3088), (0.42, 2.0)),    # the run above, apex 12
+                                             ((0.447, 0.08), (0.38, 2.5)),       # another, after a ramp 31 ms late
+                                             ((0.369, 0.638), (0.39, 2.0))])
+def test_a_robot_slowed_beyond_the_torque_limit_gets_back_to_its_setpoint(start, setpoint):
+    """Keeping the height at the torque limit and letting the speed go (before) is a trap: the slower the
+    leg sweeps, the less work the hip torque does, and from each of these apexes the robot settled at
+    0.29 m and 0.45 m/s for good. Weighing the misses as the energy they stand for, it gets back."""
+    records = run_closed_loop(controller(), load_sim_config(), HARDWARE, [setpoint] * 12, start=start)
+    assert len(records) == 12 and all(math.isfinite(r.apex_height) for r in records)      # no fall
+    assert all(r.apex_height > 0.22 for r in records)
+    last = records[-4:]
+    assert all(abs(r.apex_height - setpoint[0]) < 0.01 and abs(r.forward_speed - setpoint[1]) < 0.05 for r in last)
 
 
 @pytest.mark.parametrize("warm_angle", [0.45, 0.5, 0.6])
 def test_past_the_fold_of_the_height_map_the_stride_that_runs_forwards_is_taken(warm_angle):
-    """At the torque limit z'(theta) = z* twice: before its fold and after it, where the robot is thrown
-    back (and with the torque clipped the energy does not tell them apart). Stage 1 starting near the
-    second one (its warm start from the last stride) must not lead the stride there."""
+    """At the torque limit z'(theta) has a fold: past it the robot is thrown back (and with the torque
+    clipped the energy does not tell the two sides apart). Stage 1 starting there (its warm start from
+    the last stride) must not lead the stride there."""
     ctl = controller(adaptation=False)
     ctl.prime(0.39, 2.0)
     ctl._warm_angle, ctl._jacobian = warm_angle, None
     decision = ctl.decide(0.441, 1.309, 0.42, 2.0)
     assert decision.feasible and decision.tau_0 == SETTINGS.max_torque
     stride = predict_stride(ctl.params, 0.441, 1.309, decision.touchdown_angle, decision.tau_0, decision.ramp_duration)
-    assert stride.ok and stride.next_apex_height == pytest.approx(0.42, abs=0.002)
-    assert stride.next_forward_speed > 1.0       # the other crossing: -0.43 m/s
+    assert stride.ok and stride.next_apex_height >= SETTINGS.min_apex_height
+    assert stride.next_forward_speed > 1.5       # past the fold at 0.42 m: -0.43 m/s
 
 
 @pytest.mark.parametrize("adaptation", [True, False])

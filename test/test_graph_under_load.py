@@ -289,8 +289,11 @@ def test_a_drive_fault_while_hopping_costs_no_fall(after_apex):           # touc
         assert not run.fell, run.true_apexes[before - 1:]
         assert graph.policy.counters["faults"] == 1 and graph.driver.counters["fault_resets"] >= 1
         assert graph.robot.drive.state is State.OPERATION_ENABLED
-        assert max(abs(apex[1] - SETPOINT[0]) for apex in run.true_apexes[before + 1:]) < 0.005, \
-            run.true_apexes[before - 1:]
+        # back at the setpoint, height and speed, from the third stride after the faulted one: the ones between
+        # may be torque-limited, trading height for the speed the faulted stance lost (deadbeat.py, a setpoint
+        # out of the torque's reach; before, the height was kept and the speed came back over the same strides)
+        assert all(abs(height - SETPOINT[0]) < 0.005 and abs(speed - SETPOINT[1]) < 0.05
+                   for _, height, speed in run.true_apexes[before + 3:]), run.true_apexes[before - 1:]
     finally:
         graph.close()
 

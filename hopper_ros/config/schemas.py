@@ -260,6 +260,7 @@ class Deadbeat(Section):
     max_torque: float = unit("N m", gt=0)
     min_angle: float = unit("rad", ge=0, lt=PI_2)
     max_angle: float = unit("rad", gt=0, lt=PI_2)
+    min_apex_height: float = unit("m", gt=0)
     initial_torque: float = unit("N m", ge=0)
     adaptation: bool
     adaptation_gain: float = Field(ge=0, le=1)

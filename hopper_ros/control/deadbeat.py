@@ -26,6 +26,16 @@ measured apex minus the model's prediction for the inputs applied, is averaged (
 `adaptation_gain`) into an apex bias that the inversion then aims around: with gain 1 this is
 pure integral action on the apex error. It removes the steady offset left by whatever the model
 lacks (the simulated robot's extra effects, sensing bias). Switchable.
+
+Beyond the thesis (issue 29): a setpoint out of reach. Where the energy balance needs more than
+`max_torque` (or no angle gives z*), (5.6)'s rule, keep the height and let the speed go, is a trap:
+the slower the leg sweeps in stance, the less work the hip torque does, and a robot slowed by a
+disturbance settled at 0.29 m and 0.45 m/s for good (or, at the fold of z'(theta), was thrown back
+or down). Stage 2 then takes the stride whose height and speed misses, weighed as the energies
+they stand for (m g dz, m y'* dy'), are least, going the setpoint's way and aimed no lower than
+`min_apex_height`: the robot gets back to the setpoint within a few strides. (Keeping the height
+while that brings the apex energy nearer the setpoint's was tried: from 9 of 27 disturbed apexes
+it oscillated or hung at 1.6 m/s under a 2 m/s setpoint for 8 strides and more.)
 """
 
 from __future__ import annotations
@@ -60,6 +70,7 @@ class DeadbeatSettings:
     max_torque: float = 12.0          # [N m] just below the drive's current limit (20 A: 12.5 N m)
     min_angle: float = math.radians(2.0)
     max_angle: float = math.radians(50.0)
+    min_apex_height: float = 0.30     # [m] a stride off the setpoint is not aimed lower than this
     initial_torque: float = 4.0       # [N m] warm start of the first stride
     adaptation: bool = True
     adaptation_gain: float = 0.5      # share of the last stride's model error added to the bias
@@ -176,10 +187,11 @@ class DeadbeatController:
     def refine(self, first: StrideDecision, apex_height: float, forward_speed: float) -> StrideDecision:
         """Stage 2, during the flight (~1 ms): the inversion on the configured predictor (corrected
         AAS by default), one batched call around stage 1's inputs; also updates the defect that
-        stage 1 uses next time. Where stage 1 found nothing or the grid around it holds no stride
-        that reaches z*, or only one past the fold of z'(theta) or that runs the wrong way (Newton led
-        astray: a stale Jacobian, the fold near the torque limit), every touchdown angle is scanned
-        once (`_scan`, ~2.5 ms) before a stride is given up or one aimed off the target taken."""
+        stage 1 uses next time. Where the setpoint is out of reach, stage 2's stride is the compromise
+        of `_solve` (stage 1's keeps the height: the leg moves towards it for a millisecond). Where
+        stage 1 found nothing, or the grid's best stride lies on its edge or runs the wrong way (Newton
+        led astray: a stale Jacobian, the fold of z'(theta) near the torque limit), every touchdown
+        angle is scanned once (`_scan`, 2-7 ms) before a stride is given up."""
         s = self.settings
         if s.predictor == "aas" and first.feasible:
             return first
@@ -333,28 +345,31 @@ class DeadbeatController:
         usable = np.isfinite(miss)
         if not usable.any():
             return None
-        # (5.6): the angle where the predicted height crosses z*; among the crossings, those whose
-        # energy balance needs no torque clipping first, then the one whose speed is nearest y'*.
-        # z'(theta) has a fold: past it a second crossing throws the robot back (v' < 0; with the
-        # torque clipped the energy no longer tells them apart), which the nearest to the warm start
-        # could be (a demo under load: theta 0.70 rad, the robot hopped backwards and fell)
+        # (5.6): the angle where the predicted height crosses z* with the energy balanced (no torque
+        # clipping); of two, the one whose speed is nearest y'* (z'(theta) has a fold: past it the
+        # robot is thrown back)
         clipped = tau_needed != tau_used
-        crossings = [i for i in range(n - 1) if usable[i] and usable[i + 1] and miss[i] * miss[i + 1] <= 0.0]
+        wrong_way = usable & (speed * aim_speed < 0.0)
+        crossings = [i for i in range(n - 1) if usable[i] and usable[i + 1] and miss[i] * miss[i + 1] <= 0.0
+                     and not (wrong_way[i] or wrong_way[i + 1])]
         if crossings:
             i = min(crossings, key=lambda j: (bool(clipped[j] or clipped[j + 1]),
                                               abs(speed[j] - aim_speed) + abs(speed[j + 1] - aim_speed)))
             w = miss[i] / (miss[i] - miss[i + 1]) if miss[i] != miss[i + 1] else 0.0
             pick = lambda a: float(a[i] + w * (a[i + 1] - a[i]))  # noqa: E731
-            status = "torque limit" if (clipped[i] or clipped[i + 1]) else ""
-            if status and miss[i] > miss[i + 1]:      # z' falls with theta here: past the fold
-                status = "past the fold"
-            return (pick(tau_used), pick(angles), pick(ramp), pick(height), pick(speed), pick(stride_time), status)
-        # none reaches z*: the nearest height among the strides that go the setpoint's way, if any do
-        wrong_way = usable & (speed * aim_speed < 0.0)
+            if not (clipped[i] or clipped[i + 1]):
+                return (pick(tau_used), pick(angles), pick(ramp), pick(height), pick(speed), pick(stride_time), "")
+        # the setpoint's energy out of the torque's reach, or its height out of every angle's: not (5.6)'s
+        # height kept and speed let go (the slower the leg sweeps, the less work the torque does: a trap),
+        # but the stride nearest the setpoint, its height and speed misses weighed as the energies they
+        # stand for (m g dz, m y'* dy'), among those that go the setpoint's way and stay above min_apex_height
         candidates = usable & ~wrong_way if (usable & ~wrong_way).any() else usable
-        best = int(np.nanargmin(np.where(candidates, np.abs(miss), np.nan)))
+        safe = candidates & (height >= s.min_apex_height)
+        candidates = safe if safe.any() else candidates
+        cost = (p.gravity * miss) ** 2 + (aim_speed * (speed - aim_speed)) ** 2
+        best = int(np.nanargmin(np.where(candidates, cost, np.nan)))
         at_edge = best in (0, n - 1) and s.min_angle < angles[best] < s.max_angle
-        status = "outside" if at_edge else "height out of reach"
+        status = "outside" if at_edge else "torque limit" if clipped[best] else "height out of reach"
         return (float(tau_used[best]), float(angles[best]), float(ramp[best]), float(height[best]),
                 float(speed[best]), float(stride_time[best]), status)
 
@@ -366,8 +381,6 @@ class DeadbeatController:
         tau_0, angle, ramp, height, speed, stride_time, status = solved
         if status == "outside":
             status = "height out of reach"
-        elif status == "past the fold":
-            status = "torque limit"
         self._warm_angle, self._warm_torque = angle, tau_0
         return StrideDecision(stride_index, True, status, tau_0, angle, ramp, height + bias[0], speed + bias[1],
                               stride_time, target_height, target_speed, height, speed, bias=bias)
@@ -414,7 +427,7 @@ def _better(one, other, aim_height, aim_speed) -> bool:
     """Is solution `one` better than `other` (tuples of `_solve`)? A stride reaching z* beats one that does
     not; then the smaller height miss, the smaller speed miss."""
     def rank(solved):
-        reaches = solved[-1] in ("", "torque limit", "past the fold")
+        reaches = solved[-1] in ("", "torque limit")
         return (not reaches, 0.0 if reaches else abs(solved[3] - aim_height), abs(solved[4] - aim_speed))
     return rank(one) < rank(other)
 
