@@ -26,7 +26,10 @@ def test_a_loop_that_keeps_its_deadlines_is_kept():
 def test_late_states_watchdog_stops_and_stalls_each_say_why():
     before = _diagnostics(1000, 100)
     late = int(3000 * (REHEARSAL_LATE_MAX + 5) / 100)
-    assert rate_not_kept(loop_health(_diagnostics(4000, 100 + late), before)) == "55 % of the states late"
+    assert rate_not_kept(loop_health(_diagnostics(4000, 100 + late), before)) == \
+        f"{REHEARSAL_LATE_MAX + 5:.0f} % of the states late"
+    # the rehearsal that let a 1 kHz demo through at 44 % late (4 watchdog stops in its run, 0.55 cm off)
+    assert rate_not_kept(loop_health(_diagnostics(4000, 100 + 1320), before)) == "44 % of the states late"
     assert rate_not_kept(loop_health(_diagnostics(4000, 200, watchdog_stops=3), before)) == \
         "3 watchdog stops of the drive"
     both = rate_not_kept(loop_health(_diagnostics(4000, 2900, resyncs=2), before))
