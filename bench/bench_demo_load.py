@@ -4,10 +4,15 @@
 processes per core, a second real-time process (SCHED_FIFO 50, the demo loop's priority: busy for up
 to 8 ms every 25 ms), fsync'd writes of 16 MiB and stalls of the simulated robot's process (SIGSTOP
 for 60-150 ms every 2-4 s):
-- 10 with launch/demo.launch.yaml, the loop on SCHED_FIFO as `make demo` runs it (`*_fifo`);
+- 10 with launch/demo.launch.yaml, the loop on SCHED_FIFO as `make demo` runs it (`*_fifo`): its rate
+  chosen by its own rehearsal (`--rate auto`: 1 kHz where the machine keeps it, else 500 Hz; per run
+  `rate_hz`);
 - 5 at 500 Hz with normal scheduling (`hopper demo --normal-scheduling`: the same graph, as `make demo` runs
-  it where SCHED_FIFO is not permitted; `*_normal`), so the load's real-time process runs without it too.
-(--quick: 1 and 1.) Each on a ROS domain of its own. Per run, from the demo's strides.csv and
+  it where SCHED_FIFO is not permitted; `*_normal`), so the load's real-time process runs without it too;
+- and, apart from those 15, 3 that insist on 1 kHz on SCHED_FIFO (`--rate 1000`, `*_forced_1khz`): what the
+  1 kHz loop itself does where the rehearsal would not have run it (on a 2-core machine the graph's 1 kHz
+  real-time demand and the load's real-time process pass the kernel's 95 % real-time budget).
+(--quick: 1, 1 and 1.) Each on a ROS domain of its own. Per run, from the demo's strides.csv and
 health.json (the nodes' diagnostics from the throw on, hopper_ros/cli/demo.py): a fall, the largest
 |apex error| past each setpoint's first stride, the states that reached the event detector more
 than a sample period after their sample (1 ms; 2 ms at 500 Hz), the stance ramps the controller cancelled, the stances in which the
@@ -36,8 +41,8 @@ from hopper_ros.runtime.environment import free_domain_id, realtime_scheduling_a
 
 OUT = REPO / "bench" / "out" / "demo_load"
 STRIDES = 30
-RUNS_FIFO, RUNS_NORMAL = 10, 5
-QUICK_RUNS_FIFO, QUICK_RUNS_NORMAL = 1, 1
+RUNS_FIFO, RUNS_NORMAL, RUNS_FORCED = 10, 5, 3
+QUICK_RUNS_FIFO, QUICK_RUNS_NORMAL, QUICK_RUNS_FORCED = 1, 1, 1
 RUN_TIMEOUT = 240.0          # [s] one demo run, start to stop
 LOAD = dict(busy_per_core=3, io_chunk_mb=16, stall=(0.06, 0.15), stall_every=3.0)
 BURST = (0.008, 0.025)       # [s] the second real-time process: busy up to this long, this often
@@ -59,8 +64,9 @@ def apex_errors(rows) -> list[float]:
     return errors
 
 
-def one_run(index: int, fifo: bool) -> dict:
-    folder = OUT / f"run_{index:02d}_{'fifo' if fifo else 'normal'}"
+def one_run(index: int, fifo: bool, forced: bool = False) -> dict:
+    label = 'forced_1khz' if forced else 'fifo' if fifo else 'normal'
+    folder = OUT / f"run_{index:02d}_{label}"
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir(parents=True)
     log = folder / "launch.log"
@@ -74,9 +80,8 @@ def one_run(index: int, fifo: bool) -> dict:
 
     env = dict(child_env(), ROS_DOMAIN_ID=str(free_domain_id(index + 40)))
     argv = [sys.executable, "-m", "hopper_ros.cli", "demo", "--strides", str(STRIDES), "-o", str(folder)]
-    # the 1 kHz loop itself, as issue 29 asks, not the 500 Hz one `hopper demo` falls back to when its rehearsal
-    # finds this machine too slow for it
-    argv += ["--rate", "1000"] if fifo else ["--normal-scheduling"]
+    # as `make demo` runs it: on SCHED_FIFO its rehearsal chooses 1 kHz or 500 Hz (--rate auto)
+    argv += ["--rate", "1000"] if forced else [] if fifo else ["--normal-scheduling"]
     started = time.monotonic()
     with Load(profile(fifo), stall_target=sim_pid, seed=index) as load, \
             open(folder / "demo.out", "w", encoding="utf-8") as out:
@@ -90,7 +95,8 @@ def one_run(index: int, fifo: bool) -> dict:
     health = json.loads((folder / "health.json").read_text()) if (folder / "health.json").exists() else {}
     text = (folder / "demo.out").read_text(errors="replace")
     errors = apex_errors(rows)
-    return {"run": index, "fifo": fifo, "status": status, "fell": "the robot fell" in text,
+    rate = 500 if not fifo or re.search(r"starting the graph.* at 500 Hz", text) else 1000
+    return {"run": index, "fifo": fifo, "forced_1khz": forced, "rate_hz": rate, "status": status, "fell": "the robot fell" in text,
             "strides": len(rows), "apex_err_max_cm": max(errors, default=math.nan),
             "apex_err_mean_cm": sum(errors) / len(errors) if errors else math.nan,
             "stalls": len(load.stalls), "seconds": time.monotonic() - started, **health}
@@ -140,32 +146,43 @@ def figures(runs: list[dict], suffix: str) -> list[dict]:
 
 
 def run(quick=False):
-    fifo_runs, normal_runs = (QUICK_RUNS_FIFO, QUICK_RUNS_NORMAL) if quick else (RUNS_FIFO, RUNS_NORMAL)
+    fifo_runs, normal_runs, forced_runs = ((QUICK_RUNS_FIFO, QUICK_RUNS_NORMAL, QUICK_RUNS_FORCED) if quick
+                                           else (RUNS_FIFO, RUNS_NORMAL, RUNS_FORCED))
     OUT.mkdir(parents=True, exist_ok=True)
     allowed, why = realtime_scheduling_allowed()
     if not allowed:
-        print(f"bench_demo_load: SCHED_FIFO not permitted ({why}): the FIFO runs use the 500 Hz graph too")
+        print(f"bench_demo_load: SCHED_FIFO not permitted ({why}): the FIFO runs use the 500 Hz graph too, "
+              "and none insists on 1 kHz")
+        forced_runs = 0
     runs = []
     with open(OUT / "runs.jsonl", "w", encoding="utf-8") as record:
-        for index in range(fifo_runs + normal_runs):
-            fifo = index < fifo_runs and allowed
-            result = one_run(index, fifo)
+        for index in range(fifo_runs + normal_runs + forced_runs):
+            forced = index >= fifo_runs + normal_runs
+            fifo = (index < fifo_runs or forced) and allowed
+            result = one_run(index, fifo, forced)
             runs.append(result)
             record.write(json.dumps(result) + "\n")
             record.flush()
-            print(f"  run {index}: {'SCHED_FIFO 1 kHz' if fifo else 'normal 500 Hz'}, "
+            kind = 'normal' if not fifo else 'SCHED_FIFO, 1 kHz insisted on' if forced else 'SCHED_FIFO'
+            print(f"  run {index}: {kind} {result['rate_hz']} Hz, "
                   f"{'FELL' if result['fell'] else str(result['strides']) + ' strides'}, max |apex error| "
                   f"{result['apex_err_max_cm']:.2f} cm, late {result.get('late_samples_pct', math.nan):.1f} %, "
                   f"gaps p99 {result.get('command_gap_p99_ms', math.nan):.1f} / max "
                   f"{result.get('command_gap_max_ms', math.nan):.1f} ms, {result['stalls']} stalls", flush=True)
-    fifo_results = [r for r in runs if r["fifo"]]
-    normal_results = [r for r in runs if not r["fifo"]]
-    out = figures(runs, "")
+    forced_results = [r for r in runs if r["forced_1khz"]]
+    counted = [r for r in runs if not r["forced_1khz"]]
+    fifo_results = [r for r in counted if r["fifo"]]
+    normal_results = [r for r in counted if not r["fifo"]]
+    out = figures(counted, "")
     if fifo_results:
         out += figures(fifo_results, "_fifo")
     if normal_results:
         out += figures(normal_results, "_normal")
-    out.append({"name": "demo_load_runs", "value": len(runs), "unit": "runs"})
+    if forced_results:
+        out += figures(forced_results, "_forced_1khz")
+    out.append({"name": "demo_load_runs", "value": len(counted), "unit": "runs"})
+    out.append({"name": "demo_load_fifo_runs_at_1khz", "value": sum(r["rate_hz"] == 1000 for r in fifo_results),
+                "unit": f"of {len(fifo_results)} SCHED_FIFO runs (the rest at 500 Hz, chosen by the demo's rehearsal)"})
     return out
 
 
