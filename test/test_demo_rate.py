@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from hopper_ros.cli.demo import REHEARSAL_LATE_MAX, loop_health, rate_not_kept
+from hopper_ros.cli.demo import HEALTH_NODES, REHEARSAL_LATE_MAX, loop_health, rate_not_kept, reported_since
 
 
 def _diagnostics(samples, late, watchdog_stops=0, resyncs=0):
@@ -62,3 +62,18 @@ def test_a_state_is_late_after_the_loops_own_period(rclpy_session, monkeypatch, 
 
 def test_a_node_that_did_not_report_is_no_verdict():
     assert rate_not_kept(loop_health({}, {})) == ""
+
+
+def test_the_counters_are_taken_only_once_every_node_has_reported_since_the_graph_came_up():
+    """A node that has not reported since the graph came up (the simulated robot reports 1 s after it starts)
+    would have its start-up's stalls counted as the rehearsal's: 1 kHz rehearsals with 0-4 % of the states late
+    were rejected for the stalls of a container loading its nodes, before the drive was enabled."""
+    came_up = 100.0
+    reported = {name: came_up + 0.3 for name in HEALTH_NODES}
+    assert reported_since(reported, came_up)
+    assert not reported_since(reported | {"sim_robot": came_up - 0.7}, came_up)
+    assert not reported_since({name: t for name, t in reported.items() if name != "sim_robot"}, came_up)
+    # and what a snapshot without the robot's report would count: its start-up's 2 stalls as the rehearsal's
+    before = {"event_detector": {"samples": 500, "late_samples": 10}, "motor_driver": {"watchdog_stops": 0}}
+    after = _diagnostics(3500, 100, resyncs=2)
+    assert rate_not_kept(loop_health(after, before)) == "2 stalls of the robot"
