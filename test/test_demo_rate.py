@@ -32,8 +32,15 @@ def test_late_states_watchdog_stops_and_stalls_each_say_why():
     assert rate_not_kept(loop_health(_diagnostics(4000, 100 + 1320), before)) == "44 % of the states late"
     assert rate_not_kept(loop_health(_diagnostics(4000, 200, watchdog_stops=3), before)) == \
         "3 watchdog stops of the drive"
-    both = rate_not_kept(loop_health(_diagnostics(4000, 2900, resyncs=2), before))
-    assert both == "93 % of the states late, 2 stalls of the robot"
+    both = rate_not_kept(loop_health(_diagnostics(4000, 2900, watchdog_stops=1), before))
+    assert both == "93 % of the states late, 1 watchdog stops of the drive"
+
+
+def test_a_stall_of_the_robot_alone_does_not_reject_the_rate():
+    """The machine stopping the simulated robot's process stops it at any rate: under bench_demo_load's stalls
+    the 1 kHz loop did as well as the 500 Hz one those stalls had sent the demo to."""
+    before = _diagnostics(1000, 10)
+    assert rate_not_kept(loop_health(_diagnostics(4000, 40, resyncs=2), before)) == ""
 
 
 @pytest.mark.parametrize("hardware_file, late", [("hardware.yaml", 2), ("demo/hardware_500hz.yaml", 1)])
@@ -73,7 +80,7 @@ def test_the_counters_are_taken_only_once_every_node_has_reported_since_the_grap
     assert reported_since(reported, came_up)
     assert not reported_since(reported | {"sim_robot": came_up - 0.7}, came_up)
     assert not reported_since({name: t for name, t in reported.items() if name != "sim_robot"}, came_up)
-    # and what a snapshot without the robot's report would count: its start-up's 2 stalls as the rehearsal's
-    before = {"event_detector": {"samples": 500, "late_samples": 10}, "motor_driver": {"watchdog_stops": 0}}
-    after = _diagnostics(3500, 100, resyncs=2)
-    assert rate_not_kept(loop_health(after, before)) == "2 stalls of the robot"
+    # and what a snapshot without the driver's report would count: its start-up's watchdog stop as the rehearsal's
+    before = {"event_detector": {"samples": 500, "late_samples": 10}, "sim_robot": {"resyncs": 2}}
+    after = _diagnostics(3500, 100, watchdog_stops=1, resyncs=2)
+    assert rate_not_kept(loop_health(after, before)) == "1 watchdog stops of the drive"
