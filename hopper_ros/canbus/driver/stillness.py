@@ -29,6 +29,8 @@ FROZEN_AFTER = 0.025    # [s] silent this long: the robot stands still (past sim
 FROZEN_MIN = 0.01       # [s] fewer SYNCs than this left unanswered are answers still in transit
 SETTLE = 0.005          # [s] after a silence, the late answers still coming in this long
 SILENCES_KEPT = 8       # the last times the robot stood still, kept for `frozen_after`
+STOOD_STILL_LATELY = 0.25   # [s] a stand-still that ended this recently may still come as a re-anchored sensing
+                            #   clock (it re-anchors clock_reanchor_after, 10 ms, after the robot is back)
 
 
 class DriveStillness:
@@ -44,6 +46,8 @@ class DriveStillness:
         self._silences: list[tuple[float, float]] = []   # (when it ended, how long it stood still)
         self._ended = now                         # the first answer after the last silence
         self.reflected = False                    # the latest stand-still is in the sensing clock's stamps
+        self._last_stood_still = -math.inf        # when the latest stand-still ended (reflected or not)
+        self._answering_since: float | None = None   # the first answer of the present run of answers
 
     @property
     def silent(self) -> bool:
@@ -57,6 +61,8 @@ class DriveStillness:
     def on_answer(self, now: float) -> None:
         self.answered += 1
         self._last_answer = now
+        if self._answering_since is None:
+            self._answering_since = now
 
     def standing_still(self, now: float) -> float:
         """[s] The present silence, once it is long enough to be the robot standing still (and is not yet
@@ -87,6 +93,15 @@ class DriveStillness:
         that whole time early."""
         return sum(frozen for ended, frozen in self._silences if ended > stamp) + self.pending(now, stamp)
 
+    def stood_still_lately(self, now: float) -> bool:
+        """Whether the robot may have stood still lately: its drive not answering every SYNC for the last
+        STOOD_STILL_LATELY (starting, silent now, a silence's count still settling), or a stand-still ended within
+        it. A sensing clock re-anchored by a stand-still's worth while the drive answered every SYNC is the host
+        reading the robot's packets late (a starved process catching up at less than twice their pace), not the
+        robot standing still."""
+        answering = self._answering_since is not None and now - self._answering_since >= STOOD_STILL_LATELY
+        return not answering or self.silent or self.settling or now - self._last_stood_still < STOOD_STILL_LATELY
+
     def reflect(self) -> None:
         """The sensing clock re-anchored by the latest stand-still (`reflected`, until the next silence):
         the stamps are on the robot's clock as it now stands, so no stand-still so far moves them."""
@@ -102,6 +117,8 @@ class DriveStillness:
                 return None
             self._floor = unanswered
         quiet = now - self._last_answer > SILENT_PERIODS * self.sync_period
+        if quiet:
+            self._answering_since = None
         if quiet and self._silence_began is None:
             result = self._settle() if self._least_unanswered is not None else None
             self._silence_began, self.reflected = self._last_answer, False
@@ -127,6 +144,7 @@ class DriveStillness:
             return 0.0
         self._floor += excess
         self.frozen_time += frozen
+        self._last_stood_still = self._ended
         if self.reflected:          # in the stamps already: it moves nothing
             return 0.0
         self._silences = [*self._silences[1 - SILENCES_KEPT:], (self._ended, frozen)]
