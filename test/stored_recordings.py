@@ -55,11 +55,26 @@ def command_of(plant: str, code: str, cwd: str = "test") -> dict:
     return {"code": textwrap.dedent(code), "cwd": cwd, "plant": plant, "sources": _sources(plant)}
 
 
+# numpy's SIMD levels up to the one the store was written with: its AVX-512 loops (exp, sin, ...) round some last
+# digits otherwise, and a recording written on a CPU that has them differed from the stored one in its 14th digit
+SIMD_KEPT = ("X86_V2", "X86_V3")
+
+
+def plant_environment() -> dict:
+    """The environment a plant writes in: numpy's CPU dispatch held to SIMD_KEPT (NPY_DISABLE_CPU_FEATURES, only
+    with what this CPU has beyond them: numpy warns of a feature it lacks)."""
+    import numpy
+
+    found = numpy.__config__.CONFIG.get("SIMD Extensions", {}).get("found", [])
+    beyond = [feature for feature in found if feature not in SIMD_KEPT]
+    return dict(os.environ, NPY_DISABLE_CPU_FEATURES=" ".join(beyond)) if beyond else dict(os.environ)
+
+
 def run(command: dict, folder: Path) -> None:
     """Write the command's recordings into `folder` with the plant itself (a process of its own)."""
     folder.mkdir(parents=True, exist_ok=True)
     subprocess.run([sys.executable, "-c", command["code"], str(folder)], check=True, capture_output=True,
-                   timeout=TIMEOUT, cwd=REPO / command["cwd"])
+                   timeout=TIMEOUT, cwd=REPO / command["cwd"], env=plant_environment())
 
 
 def unpack(entry: Path, folder: Path) -> list:
