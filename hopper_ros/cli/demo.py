@@ -323,9 +323,9 @@ def _follow(args, launcher, health: dict, rehearse: str = "") -> tuple[list[Stri
 def reported_since(reported: dict, since: float) -> bool:
     """Has every node of HEALTH_NODES reported after `since` (`reported`: node -> time.monotonic() of its last
     report)? Counters taken before a node's first report count what its start-up went through as the rehearsal's
-    or the run's: the simulated robot first reports 1 s after it starts, and 1 kHz rehearsals with 0-4 % of the
-    states late were rejected for 1-2 stalls of the robot while the graph was starting (a container loading its
-    nodes), before the drive was even enabled."""
+    or the run's: the simulated robot first reports 1 s after it starts, and the stalls of the graph's start-up (a
+    container loading its nodes, before the drive was even enabled) were counted as the rehearsal's, with 3-4 % of
+    its states late where 0 % came after the graph was up."""
     return all(reported.get(name, -math.inf) > since for name in HEALTH_NODES)
 
 
