@@ -110,11 +110,38 @@ def test_the_emulated_drive_catches_up_one_sync_period_a_step_and_answers_none_o
             master.send(sync_frame())
             drive.poll(0.003 + k * 0.001)
         assert answers(master) == 20
-        drive.discard_syncs(0.010)                        # the robot stood still 10 ms: those SYNCs never seen
-        for _ in range(12):
+        for _ in range(10):                               # the robot stood still 10 ms: those SYNCs never seen
+            master.send(sync_frame())
+        drive.discard_syncs()
+        for _ in range(2):
             master.send(sync_frame())
         drive.poll(0.03)
         assert answers(master) == 2 and drive.counters.syncs_missed == 10
+    finally:
+        master.shutdown()
+        drive_bus.shutdown()
+
+
+def test_a_freeze_withholds_the_answers_of_the_syncs_sent_meanwhile_and_of_no_later_one():
+    """The robot stood still 10 ms while its master, starved itself, sent only 4 SYNCs: those 4 go
+    unanswered, and each SYNC after the drive woke is answered in its own period (one_sync polls, the robot
+    catching up). Counted from the time stood still (10 SYNCs), the drive
+    withheld the answers of 6 SYNCs after it woke, and the stance ramp's current they carried: the torque
+    reached the leg 5.7 ms after a touchdown (bench_demo_load, normal scheduling: the apex 1.5 cm high)."""
+    drive, master, drive_bus = emulator_pair()
+    try:
+        for k in range(20):                               # a regular SYNC period seen
+            master.send(sync_frame())
+            drive.poll(0.001 + k * PERIOD)
+        assert answers(master) == 20
+        for _ in range(4):
+            master.send(sync_frame())
+        drive.discard_syncs()
+        for k in range(6):
+            master.send(sync_frame())
+            drive.poll(0.031 + k * PERIOD, one_sync=True)
+            assert answers(master) == 1, f"the SYNC {k + 1} periods after the drive woke went unanswered"
+        assert drive.counters.syncs_missed == 4
     finally:
         master.shutdown()
         drive_bus.shutdown()

@@ -399,7 +399,7 @@ def test_a_touchdown_stamped_after_a_stand_still_starts_its_ramp_at_its_stamp(ri
     ramp(predicted, 0.0, 5)
     r.drive_alive = False                                  # the robot stands still
     ramp(predicted, 0.0, round(stood / SETTINGS.sync_period))
-    r.drive.discard_syncs(stood)
+    r.drive.discard_syncs()
     measured = r.clock.t + 0.001                           # just after it, on the re-anchored clock
     ramp(measured, stood, 3)                               # heard before the drive's first answer
     r.drive_alive = True
@@ -444,6 +444,56 @@ def test_a_sensing_clock_re_anchored_while_the_drive_answered_every_sync_moves_n
             assert values[2] == pytest.approx(_ramp_milliamps(tau_0, duration, t - later), abs=1)
 
 
+def test_a_sensing_clock_re_anchored_after_the_drivers_own_cycle_stalled_is_followed(rig):
+    """The driver's own process starved 48 ms while the simulated robot's world stood still as long (its runner
+    starved past RESYNC_AFTER): the driver sent no SYNC meanwhile, so none went unanswered, and the answers after
+    it looked like a drive that ran on. Taken for the host's lateness, the sensing clock's step of 48 ms was kept
+    off every later stamp and each stance ramp began 48 ms before its touchdown (a loaded 500 Hz run at start-up:
+    the robot fell in 5 strides). A stalled cycle watched no answers: the step is followed."""
+    from hopper_ros.canbus.driver.stillness import STOOD_STILL_LATELY
+
+    r = rig().start()
+    r.enable(torque=1.0)
+    tau_0, duration, step = 6.0, 0.05, 0.048
+    r.step(round(STOOD_STILL_LATELY / SETTINGS.sync_period), command=(MODE_POSITION, 0.0, 0.0, 0.0, 0.0))
+    r.driver_alive = r.drive_alive = False               # both starved: no SYNC sent, the robot's world still
+    r.step(round(step / 0.001))
+    r.driver_alive = r.drive_alive = True
+    r.step(5, command=(MODE_POSITION, 0.0, 0.0, 0.0, step))   # the sensing clock re-anchored by the stand-still
+    stamp = r.clock.t + 0.010                            # a touchdown predicted on it
+    r.rpdos.clear()
+    for _ in range(40):
+        r.step(1, command=(MODE_RAMP, tau_0, duration, r.clock.t + 0.001 - stamp, step))
+    for t, _, values in r.rpdos:
+        if t < stamp - 0.001:
+            assert values[2] == 0, f"ramp current {values[2]} mA at {1e3 * (t - stamp):.0f} ms before its touchdown"
+        elif t > stamp + 0.001:
+            assert values[2] == pytest.approx(_ramp_milliamps(tau_0, duration, t - stamp), abs=1)
+    assert not any("keeps the drive's time" in text for _, text in r.driver.drain_events())
+
+
+def test_a_step_of_the_sensing_clock_not_taken_back_is_followed_after_stamp_shift_kept(rig):
+    """A step later taken for the host's lateness is proved by the step back when the host catches up; one that
+    never comes back was the robot's (a stand-still its drive's answers could not show). Kept for good, it put
+    every later ramp that far ahead of its touchdown; past STAMP_SHIFT_KEPT the stamps are followed again."""
+    from hopper_ros.canbus.driver.stillness import STAMP_SHIFT_KEPT, STOOD_STILL_LATELY
+
+    r = rig().start()
+    r.enable(torque=1.0)
+    tau_0, duration, step = 6.0, 0.05, 0.03
+    r.step(round(STOOD_STILL_LATELY / SETTINGS.sync_period), command=(MODE_POSITION, 0.0, 0.0, 0.0, 0.0))
+    r.step(5, command=(MODE_POSITION, 0.0, 0.0, 0.0, step))
+    assert any("keeps the drive's time" in text for _, text in r.driver.drain_events())
+    r.step(round(STAMP_SHIFT_KEPT / 0.001) + 5, command=(MODE_POSITION, 0.0, 0.0, 0.0, step))
+    assert any("follows the stamps" in text for _, text in r.driver.drain_events())
+    stamp = r.clock.t + 0.010
+    r.rpdos.clear()
+    for _ in range(40):
+        r.step(1, command=(MODE_RAMP, tau_0, duration, r.clock.t + 0.001 - stamp, step))
+    started = [t for t, _, values in r.rpdos if values[2] != 0]
+    assert started and started[0] >= stamp - 0.001, "the ramp began before its touchdown"
+
+
 def test_a_sensing_clock_re_anchored_before_the_drive_has_answered_for_long_is_followed(rig):
     """Where the drive's answers cannot tell (it has answered for less than STOOD_STILL_LATELY: the graph starting,
     the simulated robot stopped before its drive was enabled), a re-anchored clock is followed as before: taken
@@ -474,7 +524,7 @@ def test_the_drive_counts_as_silent_until_its_count_of_a_stand_still_has_settled
     r.drive_alive = False
     r.step(60, command=(MODE_CURRENT, 0.5))
     assert r.driver.silent
-    r.drive.discard_syncs(0.06)
+    r.drive.discard_syncs()
     r.drive_alive = True
     r.step(2, command=(MODE_CURRENT, 0.5))
     assert r.driver.stillness.answered and not r.driver.stillness.silent and r.driver.silent   # answers, count open

@@ -169,6 +169,7 @@ class SocketcandServer:
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)          # a full pipe means a wake-up is pending anyway
         self._wake_pending = threading.Event()
+        self._turn = threading.Lock()             # one turn of the socket thread, or read_pending
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -250,27 +251,41 @@ class SocketcandServer:
         selector.register(self._wake_r, selectors.EVENT_READ, "wake")
         try:
             while not self._stop.is_set():
-                for key, events in selector.select(_SELECT_TIMEOUT):
-                    if key.data == "listen":
-                        self._accept(selector)
-                    elif key.data == "wake":
-                        self._wake_pending.clear()
-                        try:
-                            while self._wake_r.recv(_RECV_SIZE):
-                                pass
-                        except OSError:
-                            pass
-                    else:
-                        client = key.data
-                        if events & selectors.EVENT_WRITE:
-                            client.writable = True
-                        if events & selectors.EVENT_READ:
-                            self._read(client)
-                self._flush(selector)
+                ready = selector.select(_SELECT_TIMEOUT)
+                with self._turn:
+                    self._serve(selector, ready)
         except Exception:                                     # keep close() working
             log.exception("socketcand hub: socket thread failed")
         finally:
             selector.close()
+
+    def _serve(self, selector, ready) -> None:
+        for key, events in ready:
+            if key.data == "listen":
+                self._accept(selector)
+            elif key.data == "wake":
+                self._wake_pending.clear()
+                try:
+                    while self._wake_r.recv(_RECV_SIZE):
+                        pass
+                except OSError:
+                    pass
+            else:
+                client = key.data
+                if events & selectors.EVENT_WRITE:
+                    client.writable = True
+                if events & selectors.EVENT_READ:
+                    self._read(client)
+        self._flush(selector)
+
+    def read_pending(self) -> None:
+        """Take in now what every client has sent so far (any thread; the socket thread's work, done at
+        once): the simulated robot, woken from a stop, has its drive see every frame sent meanwhile as one
+        sent while it stood still (Epos2Emulator.discard_syncs), whichever of its threads ran first."""
+        with self._turn:
+            for client in list(self._clients):
+                if not client.dead:
+                    self._read(client)
 
     def _accept(self, selector) -> None:
         for _ in range(_ACCEPTS_PER_TURN):

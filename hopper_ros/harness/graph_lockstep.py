@@ -116,7 +116,7 @@ class GraphLockstep:
                 self._command()
                 self._cycle()
             if gap > RESYNC_AFTER:                       # beyond it the world stood still (sim/runner.py):
-                self.robot.drive.discard_syncs(gap - period)   #   its SYNCs are never answered
+                self.robot.drive.discard_syncs()   #   the SYNCs sent meanwhile are never answered
                 self._behind_base = arrival - sample.truth.t   #   and it goes on from then, behind no more
             else:                                        # a shorter stall is caught up, a SYNC period a step
                 self._catching_up = True

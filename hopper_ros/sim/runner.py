@@ -137,8 +137,10 @@ class SimRunner:
                 if late > RESYNC_AFTER:                    # the time missed is skipped: the robot was frozen
                     deadline = time.monotonic()
                     self.counters["resyncs"] += 1
+                    if self.hub is not None:
+                        self.hub.read_pending()            # what the master sent meanwhile, at the drive now
                     if self.drive is not None:
-                        self.drive.discard_syncs(late)
+                        self.drive.discard_syncs()
                     late = 0.0
                 catching_up = late > period
                 self.behind = late

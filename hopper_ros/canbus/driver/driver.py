@@ -48,7 +48,7 @@ from .skipped import SkippedImpulse
 from .settings import (COUNTER_NAMES, ERROR, INFO, MODE_CURRENT, MODE_DISABLED, MODE_NAMES, MODE_POSITION, MODE_RAMP,
                        WARN, DriveConfig, DriverSettings)
 from .startup import RPDO_MAPPINGS, TPDO_MAPPINGS
-from .stillness import FROZEN_MIN, DriveStillness
+from .stillness import FROZEN_MIN, STAMP_SHIFT_KEPT, DriveStillness
 from .status import DriveStatus, Phase, connection_closed, first_line
 from .units import DriveUnits
 
@@ -126,6 +126,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         self._follows = False               # the ramp moves with the latest stand-still (it came after its stamp)
         self._clock_offset: float | None = None   # [s] the sensing clock mapping of the latest command's stamp
         self._stamp_shift = 0.0   # [s] the sensing clock's re-anchors the drive's answers did not bear out, taken off stamps
+        self._shifted_at = -math.inf   # when it last grew (kept STAMP_SHIFT_KEPT at most without the step back)
         self._last_answer = now             # when the drive last answered a SYNC (its TPDOs complete)
         self._next_master_heartbeat = now
         self._nmt_start_sent_at = -math.inf
@@ -401,6 +402,11 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         scheduling, catching up slowly); the step is taken off the stamps, so that the measured touchdown does not
         move the ramp by it (bench_demo_load, normal scheduling: a ramp 11 ms late, the apex 1.65 cm off), until a
         step earlier (packets earlier than the mapping allowed: proof) takes it back."""
+        if self._stamp_shift and now - self._shifted_at > STAMP_SHIFT_KEPT:
+            self._event(INFO, f"the sensing clock's step of {self._stamp_shift * 1e3:.1f} ms was not taken back within "
+                              f"{STAMP_SHIFT_KEPT:.1f} s: the robot stood still after all (no SYNC of it to leave "
+                              "unanswered); the stance ramp follows the stamps", key="shift_dropped")
+            self._stamp_shift = 0.0
         if not math.isfinite(clock_offset):
             return
         step = 0.0 if self._clock_offset is None else clock_offset - self._clock_offset
@@ -409,6 +415,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
             return
         if step > 0.0 and not self.stillness.stood_still_lately(now):
             self._stamp_shift += step
+            self._shifted_at = now
             self._event(INFO, f"the sensing clock re-anchored by {step * 1e3:.1f} ms while the drive answered every "
                               "SYNC (the robot ran on: its packets were read late): the stance ramp keeps the drive's "
                               "time", key="reanchor")

@@ -31,6 +31,8 @@ SETTLE = 0.005          # [s] after a silence, the late answers still coming in 
 SILENCES_KEPT = 8       # the last times the robot stood still, kept for `frozen_after`
 STOOD_STILL_LATELY = 0.25   # [s] a stand-still that ended this recently may still come as a re-anchored sensing
                             #   clock (it re-anchors clock_reanchor_after, 10 ms, after the robot is back)
+STAMP_SHIFT_KEPT = 0.5      # [s] a re-anchor taken for the host's (MotorDriver._note_clock) not taken back by a
+                            #   step earlier within this long was the robot's after all: the stamps are followed
 
 
 class DriveStillness:
@@ -48,6 +50,7 @@ class DriveStillness:
         self.reflected = False                    # the latest stand-still is in the sensing clock's stamps
         self._last_stood_still = -math.inf        # when the latest stand-still ended (reflected or not)
         self._answering_since: float | None = None   # the first answer of the present run of answers
+        self._last_update = now                   # the last SYNC period (our own cycle: it may stall too)
 
     @property
     def silent(self) -> bool:
@@ -95,11 +98,13 @@ class DriveStillness:
 
     def stood_still_lately(self, now: float) -> bool:
         """Whether the robot may have stood still lately: its drive not answering every SYNC for the last
-        STOOD_STILL_LATELY (starting, silent now, a silence's count still settling), or a stand-still ended within
+        STOOD_STILL_LATELY (starting, silent now, a silence's count still settling, our own cycle stalled within
+        it: its SYNCs were not sent, so the robot could stand still unanswered), or a stand-still ended within
         it. A sensing clock re-anchored by a stand-still's worth while the drive answered every SYNC is the host
         reading the robot's packets late (a starved process catching up at less than twice their pace), not the
         robot standing still."""
-        answering = self._answering_since is not None and now - self._answering_since >= STOOD_STILL_LATELY
+        answering = (self._answering_since is not None and now - self._answering_since >= STOOD_STILL_LATELY
+                     and now - self._last_update < FROZEN_MIN)      # (our cycle stalled until now: it has not run yet)
         return not answering or self.silent or self.settling or now - self._last_stood_still < STOOD_STILL_LATELY
 
     def reflect(self) -> None:
@@ -112,6 +117,11 @@ class DriveStillness:
         """Once a SYNC period, before its SYNC: the time [s] the robot stood still in a silence whose
         answers have just settled (0.0 when it ran on), else None."""
         unanswered = self.sent - self.answered
+        if now - self._last_update >= FROZEN_MIN:
+            # our own cycle stalled (a starved host): no SYNC went out meanwhile, so a stand-still of the
+            # robot then left no SYNC unanswered; the answers since are no run that watched for one
+            self._answering_since = None
+        self._last_update = now
         if self._floor is None:
             if not self.answered:               # not answering yet (starting): nothing to tell
                 return None
