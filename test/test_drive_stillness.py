@@ -126,8 +126,8 @@ def test_a_freeze_withholds_the_answers_of_the_syncs_sent_meanwhile_and_of_no_la
     """The robot stood still 10 ms while its master, starved itself, sent only 4 SYNCs: those 4 go
     unanswered, and each SYNC after the drive woke is answered in its own period (one_sync polls, the robot
     catching up). Counted from the time stood still (10 SYNCs), the drive
-    withheld the answers of 6 SYNCs after it woke, and the stance ramp's current they carried: the torque
-    reached the leg 5.7 ms after a touchdown (bench_demo_load, normal scheduling: the apex 1.5 cm high)."""
+    withheld the answers of 6 SYNCs after it woke, and the stance ramp's current they carried (suspected in a
+    loaded 500 Hz run: the torque 5.7 ms after a touchdown, the apex 1.5 cm high)."""
     drive, master, drive_bus = emulator_pair()
     try:
         for k in range(20):                               # a regular SYNC period seen

@@ -201,9 +201,9 @@ class Epos2Emulator:
         motor driver counts the SYNCs left unanswered as the time the robot stood still. The SYNCs are
         those queued, not a count from the time stood still: the master's SYNCs of that time may be
         fewer (its own process starved, its cycle skipping), and the answers then withheld from SYNCs
-        that came after the drive woke held the stance ramp's current back (bench_demo_load, normal
-        scheduling: the torque reached the leg 5.7 ms after a touchdown, the apex 1.5 cm high). The
-        owner has the transport deliver what is in transit first (the hub's `read_pending`)."""
+        that came after the drive woke held the stance ramp's current back (test_drive_stillness; suspected
+        in a loaded 500 Hz run's torque 5.7 ms after a touchdown, docs/sim.md). The owner has the transport
+        deliver what is in transit first (the hub's `read_pending`)."""
         while True:
             try:
                 msg = self.bus.recv(timeout=0)
