@@ -125,6 +125,26 @@ def test_frames_between_clients_and_the_local_bus(hub):
     assert wait(lambda: hub.client_count == 0)
 
 
+def test_read_pending_takes_in_every_frame_that_has_reached_the_hub(hub):
+    """The simulated robot woken from a stop calls `read_pending` before its drive counts the SYNCs that came
+    meanwhile (Epos2Emulator.discard_syncs): every frame that has reached the hub's socket by then is on the local
+    bus when it returns, whether or not the socket thread has run since. The client here sends each frame at once
+    (TCP_NODELAY); python-can's client does not (Nagle holds a small frame until the last one is acknowledged), so
+    a few of its frames may still be in transit at a wake-up, and are answered as frames that came after it."""
+    local = hub.local_bus()
+    with socket.create_connection(hub.address, timeout=TIMEOUT) as sender:
+        sender.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sender.sendall(b"< open can0 >< rawmode >< send 000 2 01 01 >")
+        recv_until(local, lambda m: m.arbitration_id == 0x000)      # the handshake is over
+        for _ in range(40):
+            sender.sendall(b"< send 080 0 >")                        # SYNC
+        hub.read_pending()
+        taken = 0
+        while (frame := local.recv(timeout=0)) is not None:
+            taken += frame.arbitration_id == 0x080
+        assert taken == 40
+
+
 def test_a_local_bus_that_is_not_read_keeps_the_newest_frames_and_counts_the_rest(hub):
     """Local buses hand frames to each other directly (no thread): one whose receiver stops reading keeps the last
     MAX_QUEUED_FRAMES, drops the oldest and counts them; the sender never hears its own frames."""

@@ -179,12 +179,8 @@ class Epos2Emulator:
         (the simulated robot catching up on a short stall runs one SYNC period a step, the drive then
         applying each RPDO at its own SYNC as it would have on time)."""
         while True:
-            try:
-                unseen = bool(self._held)
-                msg = self._held.popleft() if unseen else self.bus.recv(timeout=0)
-            except can.CanError as exc:          # a broken transport is the owner's problem;
-                log.warning("EPOS2 emulator: receive failed: %s", exc)   # the drive survives
-                return
+            unseen = bool(self._held)
+            msg = self._held.popleft() if unseen else self._receive()
             if msg is None:
                 return
             try:
@@ -202,17 +198,19 @@ class Epos2Emulator:
         those queued, not a count from the time stood still: the master's SYNCs of that time may be
         fewer (its own process starved, its cycle skipping), and the answers then withheld from SYNCs
         that came after the drive woke held the stance ramp's current back (test_drive_stillness; suspected
-        in a loaded 500 Hz run's torque 5.7 ms after a touchdown, docs/sim.md). The owner has the transport
-        deliver what is in transit first (the hub's `read_pending`)."""
-        while True:
-            try:
-                msg = self.bus.recv(timeout=0)
-            except can.CanError as exc:
-                log.warning("EPOS2 emulator: receive failed: %s", exc)
-                break
-            if msg is None:
-                break
+        in a loaded 500 Hz run's torque 5.7 ms after a touchdown, docs/sim.md). The owner first has the
+        transport take in what has reached it (the hub's `read_pending`); a frame its sender still held
+        comes after and is answered, the stand-still counted that much short."""
+        while (msg := self._receive()) is not None:
             self._held.append(msg)
+
+    def _receive(self) -> can.Message | None:
+        """The next frame on the bus, None when none is pending."""
+        try:
+            return self.bus.recv(timeout=0)
+        except can.CanError as exc:              # a broken transport is the owner's problem;
+            log.warning("EPOS2 emulator: receive failed: %s", exc)   # the drive survives
+            return None
 
     def _handle(self, msg: can.Message, now: float, unseen: bool = False) -> bool:
         """Handle one frame; True if it was a SYNC answered. `unseen`: it came while the drive stood still."""

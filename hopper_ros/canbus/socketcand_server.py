@@ -279,9 +279,11 @@ class SocketcandServer:
         self._flush(selector)
 
     def read_pending(self) -> None:
-        """Take in now what every client has sent so far (any thread; the socket thread's work, done at
-        once): the simulated robot, woken from a stop, has its drive see every frame sent meanwhile as one
-        sent while it stood still (Epos2Emulator.discard_syncs), whichever of its threads ran first."""
+        """Take in now every frame that has reached a client's socket (any thread; the socket thread's work,
+        done at once): the simulated robot, woken from a stop, has its drive see them as sent while it stood
+        still (Epos2Emulator.discard_syncs), whichever of its threads ran first. A frame its sender still holds
+        (python-can's client leaves Nagle on: a small frame waits for the last one's acknowledgement) comes
+        later and counts as sent after the wake-up."""
         with self._turn:
             for client in list(self._clients):
                 if not client.dead:
