@@ -287,7 +287,7 @@ class SocketcandServer:
         with self._turn:
             for client in list(self._clients):
                 if not client.dead:
-                    self._read(client)
+                    self._read(client, until_empty=True)
 
     def _accept(self, selector) -> None:
         for _ in range(_ACCEPTS_PER_TURN):
@@ -318,8 +318,11 @@ class SocketcandServer:
             selector.register(sock, selectors.EVENT_READ, client)
             log.info("socketcand hub: client %s connected", peer)
 
-    def _read(self, client: _Client) -> None:
-        for _ in range(_READS_PER_TURN):
+    def _read(self, client: _Client, until_empty: bool = False) -> None:
+        """Take in what the client sent: up to _READS_PER_TURN reads, a short one ending the turn (the selector
+        says when more comes); `until_empty` reads until the socket has nothing (a segment can reach it while the
+        socket thread holds it, and comes after a short read: 33 of 40 frames at a wake-up)."""
+        for _ in range(_READS_PER_TURN * (64 if until_empty else 1)):
             try:
                 data = client.sock.recv(_RECV_SIZE)
             except BlockingIOError:
@@ -336,7 +339,7 @@ class SocketcandServer:
                 pass
             client.buffer += data.decode("ascii", errors="replace")
             self._parse(client)
-            if client.dead or len(data) < _RECV_SIZE:
+            if client.dead or (len(data) < _RECV_SIZE and not until_empty):
                 return
 
     def _parse(self, client: _Client) -> None:

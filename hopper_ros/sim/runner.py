@@ -144,6 +144,8 @@ class SimRunner:
                     late = 0.0
                 catching_up = late > period
                 self.behind = late
+            if self.hub is not None:               # every frame that has reached the drive by now, whichever of
+                self.hub.read_pending()            #   this process's threads runs first (the hub's could wait a step)
             sample = self.robot.step(catching_up)
             self.robot.plant.events.clear()      # the sample holds them: the plant's history grew without end
             self.counters["periods"] += 1        #   (0.4 kB an event, 40k an hour: the soak's memory growth)
