@@ -12,8 +12,7 @@ the simulated robot's real-time process at 1 kHz, issue 29).
 The protocol (socketcand_protocol.py), as python-can 4.6.1's client speaks it: a handshake
 (`< hi >`, `< open CHANNEL >`, `< rawmode >`, each answered `< ok >`), then frames both ways. The
 client compares the handshake answers byte for byte, so no frame follows `< ok >` for
-RAWMODE_GRACE, nor before the client's first frame for RAWMODE_HOLD; frames of that time are queued,
-not lost.
+RAWMODE_GRACE; frames of that time are queued, not lost.
 
 Nothing a client does can stall the hub (issue 17). Every client socket is non-blocking and
 only the socket thread writes to it. Frames to clients go into one shared, bounded log of
@@ -58,10 +57,6 @@ log = logging.getLogger(__name__)
 
 #: after `< ok >` to rawmode, frames wait this long [s] so the client reads the `< ok >` alone
 RAWMODE_GRACE = 0.1
-#: ... and until the client sends its first frame (it has read the `< ok >` then), this long at most [s]: a client
-#: starved past RAWMODE_GRACE read the `< ok >` and three heartbeats at once and failed its handshake (make test's
-#: load, 2026-11-29). Within the log's span (MAX_QUEUED_FRAMES at ~3000 frames/s: 1.3 s), so nothing is lost
-RAWMODE_HOLD = 0.5
 #: longest command accepted [characters] (`< send 1FFFFFFF 8 ff ff ... >` is about 45)
 MAX_COMMAND_LENGTH = 256
 #: frames kept for clients that have not taken them yet; a client further behind is dropped
@@ -105,7 +100,6 @@ class _Client:
     buffer: str = ""
     state: str = "greeted"           # greeted -> open -> raw
     raw_since: float = 0.0
-    has_sent: bool = False           # it sent a frame: past its handshake
     cursor: int = 0                  # sequence number of the next log entry this client needs
     output: bytearray = field(default_factory=bytearray)   # frames taken from the log, unsent
     replies: bytearray = field(default_factory=bytearray)  # handshake/echo answers, sent first
@@ -406,7 +400,6 @@ class SocketcandServer:
                 log.debug("socketcand hub: dropped %r: %s", " ".join(tokens), exc)
                 return
             self.counters.frames_from_clients += 1
-            client.has_sent = True
             msg.channel, msg.is_rx = self.channel, True
             for bus in self._local_buses:         # one frame object for all: a receiver does not change it
                 bus.deliver(msg)
@@ -429,7 +422,7 @@ class SocketcandServer:
                     self.counters.handshake_timeouts += 1
                     self._kill(client, "no handshake")
                     continue
-            elif client.cursor < head and now - client.raw_since >= (RAWMODE_GRACE if client.has_sent else RAWMODE_HOLD):
+            elif now - client.raw_since >= RAWMODE_GRACE and client.cursor < head:
                 if client.cursor < first:
                     self._drop_slow(client, f"fell {head - client.cursor} frames behind")
                     continue
