@@ -10,6 +10,7 @@ master in another process (test/data/socketcand_canopen_master.py).
 from __future__ import annotations
 
 import socket
+import threading
 import subprocess
 import sys
 import time
@@ -163,6 +164,46 @@ def test_a_local_bus_that_is_not_read_keeps_the_newest_frames_and_counts_the_res
 def test_wrong_channel_is_refused(hub):
     with pytest.raises(can.CanError):
         client(hub, channel="vcan7")
+
+
+def test_a_client_whose_rawmode_answer_came_with_frames_connects_again():
+    """python-can's client compares the hub's `< ok >` to rawmode byte for byte; a motor driver starved past
+    RAWMODE_GRACE under make test's load read it with three heartbeats and raised. The driver's `open_transport`
+    connects again (a server here answers the first connection so, the second as it should)."""
+    from hopper_ros.canbus.driver.bus import Transport, open_transport
+
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(4)
+    connections = []
+
+    def serve():
+        while len(connections) < 2:
+            sock, _ = listener.accept()
+            try:
+                sock.sendall(b"< hi >")
+                if not sock.recv(64):                                    # `wait_for_server`'s probe: gone
+                    sock.close()
+                    continue
+            except OSError:
+                sock.close()
+                continue
+            connections.append(sock)
+            sock.sendall(b"< ok >")                                      # to < open can0 >
+            sock.recv(64)                                                # < rawmode >
+            sock.sendall(b"< ok >" if len(connections) == 2 else b"< ok >< frame 701 1.000000 7F >")
+
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
+    bus = open_transport(Transport("socketcand", "can0", "127.0.0.1", listener.getsockname()[1], None, 5.0))
+    try:
+        server.join(TIMEOUT)
+        assert len(connections) == 2 and not server.is_alive()
+    finally:
+        bus.shutdown()
+        for sock in connections:
+            sock.close()
+        listener.close()
 
 
 def raw_client(server: SocketcandServer) -> socket.socket:

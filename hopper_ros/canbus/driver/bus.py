@@ -21,7 +21,12 @@ import can
 
 from hopper_ros.hardware.config import CanBus
 
+from .status import first_line
+
 CONNECT_TIMEOUT = 30.0   # [s] for a socketcand server to accept (the simulated robot may start later)
+HANDSHAKE_ATTEMPTS = 3   # python-can's socketcand client compares the server's answers byte for byte: one starved
+                         #   past the hub's RAWMODE_GRACE read its rawmode < ok > with three heartbeats and raised
+                         #   (make test's load, 2026-11-29); it connects again
 DEFAULT_BITRATE = 1000000
 
 
@@ -92,7 +97,15 @@ def open_transport(transport: Transport, cancelled: Callable[[], bool] = lambda:
         # python-can warns on every frame split across two TCP reads, a normal event: not ours to log
         logging.getLogger("can.interfaces.socketcand").setLevel(logging.ERROR)
         wait_for_server(transport.host, transport.port, transport.connect_timeout, cancelled)
-    return can.Bus(**config)
+    for attempt in range(1, HANDSHAKE_ATTEMPTS + 1):
+        try:
+            return can.Bus(**config)
+        except can.CanError as exc:
+            if transport.interface != "socketcand" or "Expected" not in str(exc) or attempt == HANDSHAKE_ATTEMPTS \
+                    or cancelled():
+                raise
+            logging.getLogger(__name__).warning("CAN server %s:%s: handshake failed (%s); connecting again",
+                                                transport.host, transport.port, first_line(exc))
 
 
 def open_bus(can_config: CanBus, cancelled: Callable[[], bool] = lambda: False, **overrides: Any) -> can.BusABC:
