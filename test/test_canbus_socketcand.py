@@ -10,9 +10,9 @@ master in another process (test/data/socketcand_canopen_master.py).
 from __future__ import annotations
 
 import socket
-import threading
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
