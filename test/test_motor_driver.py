@@ -298,6 +298,12 @@ def _ramp_milliamps(tau_0, duration, since_start):
     return _milliamps(float(np.mean(np.where((times >= 0.0) & (times < duration), -tau_0 * (1.0 - times / duration), 0.0))))
 
 
+def _given(rpdos, until):
+    """[mA s] What the drive gave from `rpdos` (time, number, values), each setting held until the next or `until`."""
+    times = [t for t, _, _ in rpdos] + [until]
+    return sum(values[2] * (after - t) for (t, _, values), after in zip(rpdos, times[1:]))
+
+
 def test_ramp_mode_runs_the_stance_ramp_in_the_driver_from_its_start(rig):
     """The ramp runs from its stamp; a command that came 4 ms after it gives the 4 ms it skipped as soon as the
     current limit allows (skipped, each ms moved the apex ~4 mm): the stance gets the ramp's whole impulse."""
@@ -313,7 +319,7 @@ def test_ramp_mode_runs_the_stance_ramp_in_the_driver_from_its_start(rig):
     assert paid and all(abs(m) >= limit - 1 for m in paid[:-1])        # at the limit until the skipped part is given
     assert all(m == pytest.approx(_ramp_milliamps(tau_0, duration, t - start), abs=1) for t, m in seen[len(paid):])
     settings = r.rpdos[sent_before:]                       # each held by the drive until the next
-    given = sum(values[2] * (after[0] - t) for (t, _, values), after in zip(settings, settings[1:]))
+    given = _given(settings, r.clock.t)                    # the last, held on, is 0
     # [mA s] the whole impulse, but for the command's own RPDO, which this drive takes at its next poll
     assert given == pytest.approx(_milliamps(-tau_0) * duration / 2, abs=abs(_milliamps(tau_0)) * SETTINGS.sync_period)
     assert seen[-1][1] == 0 and r.driver.counters["commands_rejected"] == 0
@@ -336,12 +342,6 @@ def test_a_ramp_scheduled_ahead_waits_for_its_stamp_and_moves_to_a_new_one(rig):
     for t, milliamps in late:
         assert milliamps == pytest.approx(_ramp_milliamps(tau_0, duration, t - measured), abs=1)
     assert r.driver.counters["commands_rejected"] == 0
-
-
-def _given(rpdos, until):
-    """[mA s] What the drive gave from `rpdos` (time, number, values), each setting held until the next or `until`."""
-    times = [t for t, _, _ in rpdos] + [until]
-    return sum(values[2] * (after - t) for (t, _, values), after in zip(rpdos, times[1:]))
 
 
 @pytest.mark.parametrize("stall", [0, 2, 4, 6])
