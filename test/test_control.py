@@ -215,6 +215,37 @@ def test_a_pre_touchdown_heard_ahead_lets_the_leg_go_at_its_time_not_when_heard(
     assert policy.phase is Phase.PRE_TOUCHDOWN
 
 
+@pytest.mark.parametrize("angle_off, rate", [(0.0, 0.0), (0.03, 2.0), (-0.25, 0.0), (0.0, 30.0), (-0.25, 31.0)])
+def test_a_leg_still_swinging_at_pre_touchdown_is_held_until_just_before_its_touchdown(angle_off, rate):
+    """A leg settled at its touchdown angle is let go at the pre-touchdown (the thesis's release, 2 cm above the
+    ground); one still swinging there (a swing begun late: a drive fault in the flight) is held in position until
+    `release_lead` before the touchdown predicted at its angle. Let go mid-swing at 31 rad/s, 0.25 rad short, it
+    swung 0.4 rad past its angle and the robot fell (a soak)."""
+    from hopper_ros.control.stride_policy import MODE_RAMP, StridePolicy
+
+    control = load_control()
+    s = control.stride
+    policy = StridePolicy(DeadbeatController(load_params(), control.deadbeat), s)
+    policy.on_setpoint(0.39, 2.0)
+    decision = policy.on_apex(0.39, 2.0, 1)
+    policy.on_sensing(0.0)
+    pre_touchdown, z, z_dot = 0.2, 0.205 * math.cos(decision.touchdown_angle) + 0.02, -1.7
+    policy.on_pre_touchdown(pre_touchdown, z, z_dot, decision.touchdown_angle + angle_off, rate)
+    unsettled = abs(angle_off) > s.settled_angle or abs(rate) > s.settled_rate
+    release = pre_touchdown
+    if unsettled:
+        release += policy.time_to_touchdown(z, z_dot, decision.touchdown_angle, 0.0) - s.release_lead
+        assert release > pre_touchdown + 0.005
+        held = policy.command(release - 0.001)
+        assert (held.mode, held.setpoint) == (MODE_POSITION, pytest.approx(decision.touchdown_angle))
+        assert policy.phase is Phase.POSITIONING
+    ramp = policy.command(release + 1e-6)
+    assert ramp.mode == MODE_RAMP and policy.phase is Phase.PRE_TOUCHDOWN
+    if unsettled:          # the touchdown predicted with the leg at its angle, where it is held
+        assert ramp.time == pytest.approx(release + s.release_lead)
+    assert policy.counters["releases_held"] == int(unsettled)
+
+
 def test_the_ramps_instants_follow_the_sensing_clock_when_it_re_anchors():
     """The robot stood still 80 ms after a pre-touchdown event (the simulated robot's process stopped):
     the sensing clock re-anchors by that time, and the next event's state says so (its stamp minus its

@@ -287,6 +287,9 @@ class Stride(Section):
     sensing_timeout: float = unit("s", 0.5, gt=0)
     keep_alive_priority_boost: int = Field(10, ge=0, le=49)
     fault_acknowledge: float = unit("s", 0.02, gt=0, le=1.0)
+    settled_angle: float = unit("rad", 0.05, gt=0)
+    settled_rate: float = unit("rad/s", 5.0, gt=0)
+    release_lead: float = unit("s", 0.003, ge=0)
 
 
 class CONTROL(Section):

@@ -57,6 +57,9 @@ class StrideSettings:
     keep_alive_priority_boost: int = 10  # SCHED_FIFO priority of the node's repeating thread above its own
     brake_disable_delay: float = 0.5    # [s] single stride: braking this long, then the drive disabled
     fault_acknowledge: float = 0.02     # [s] MODE_DISABLED this long after the last report of a drive fault
+    settled_angle: float = 0.05         # [rad] the leg this far from its touchdown angle at pre-touchdown ...
+    settled_rate: float = 5.0           # [rad/s] ... or swinging this fast: held until `release_lead` before touchdown
+    release_lead: float = 0.003         # [s] an unsettled leg let go this long before its predicted touchdown
 
     @classmethod
     def from_mapping(cls, section: Mapping[str, Any], **overrides: Any) -> "StrideSettings":
@@ -94,7 +97,7 @@ class StridePolicy:
         self.setpoint: tuple[float, float] | None = None
         self.last_decision: StrideDecision | None = None
         self.counters = {"strides": 0, "infeasible": 0, "faults": 0, "commands": 0, "touchdowns_missed": 0,
-                         "sensing_lost": 0}
+                         "sensing_lost": 0, "releases_held": 0}
         self.events: list[tuple[str, str]] = []     # (logger level, text) for the caller's log
         self._clock_offset = math.nan   # [s] the sensing clock's mapping (host minus robot time) of the last event
         self._stood_still = 0.0         # [s] its steps of a stand-still's size so far (`stand_still_step`)
@@ -165,10 +168,27 @@ class StridePolicy:
         its executor does), and the ramp is scheduled from then at the predicted touchdown. So an
         event that reaches the controller late by less than the lead costs nothing (acted on when
         heard, 1 ms ahead, it sent the ramp late under a real-time load beside the loop: its torque
-        reached the leg 5.4 ms after a touchdown)."""
+        reached the leg 5.4 ms after a touchdown).
+
+        A leg still swinging to its touchdown angle there (off by over `settled_angle` or faster than
+        `settled_rate`: the swing began late, after a drive fault or a low apex's short flight) is held
+        in position until `release_lead` before the touchdown at that angle (the ramp predicted at it too).
+        Let go mid-swing, it swung on past its angle by 0.4 rad and the robot fell (a soak: two drive
+        faults in one flight)."""
         self._release_at = time
         self._predicted_touchdown = time - self._stood_still + self.time_to_touchdown(
             z, z_dot, leg_angle, leg_angle_rate) if self.settings.ramp_ahead else math.nan
+        plan, s = self.machine.plan, self.settings
+        if plan is not None and (abs(leg_angle - plan.touchdown_angle) > s.settled_angle
+                                 or abs(leg_angle_rate) > s.settled_rate):
+            held_flight = self.time_to_touchdown(z, z_dot, plan.touchdown_angle, 0.0)   # the leg held at its angle
+            self._release_at = time + max(0.0, held_flight - s.release_lead)
+            if s.ramp_ahead:
+                self._predicted_touchdown = time - self._stood_still + held_flight
+            self.counters["releases_held"] += 1
+            self.events.append(("warning", f"pre-touchdown with the leg {leg_angle - plan.touchdown_angle:+.3f} rad "
+                                           f"off its angle at {leg_angle_rate:+.1f} rad/s: held until "
+                                           f"{(self._release_at - time) * 1e3:.0f} ms later"))
         self._frozen_at_prediction, self._stood_still_at_prediction = self._frozen_time, self._stood_still
         self._cancelled_ramp = False
 
