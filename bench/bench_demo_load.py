@@ -22,11 +22,17 @@ against the measured (both on the robot's clock), the motor command stream's gap
 stops, the simulated robot's freezes (stalls past sim/runner.py RESYNC_AFTER) with the SYNCs its
 drive never answered and the time the driver counted the robot standing still from them. The runs' folders (launch.log of every node, strides, health) stay in
 bench/out/demo_load/; runs.jsonl has one line per run.
+
+Tracing (not the bench's figures): `--bag` records the loop's topics and the simulated robot's truth of each
+run with `hopper bag record` into its folder's bag/ (what a stride that missed its apex was given, when);
+`--group normal` (or fifo, forced) runs that group only, `--runs N` of it.
 """
 import csv
 import json
 import math
+import os
 import re
+import signal
 import shutil
 import subprocess
 import sys
@@ -44,6 +50,8 @@ STRIDES = 30
 RUNS_FIFO, RUNS_NORMAL, RUNS_FORCED = 10, 5, 3
 QUICK_RUNS_FIFO, QUICK_RUNS_NORMAL, QUICK_RUNS_FORCED = 1, 1, 1
 RUN_TIMEOUT = 240.0          # [s] one demo run, start to stop
+BAG_TOPICS = ("body_state", "gait_event", "apex", "stride_command", "motor_command", "motor_status", "/diagnostics",
+              "sim/truth", "sim/events")
 LOAD = dict(busy_per_core=3, io_chunk_mb=16, stall=(0.06, 0.15), stall_every=3.0)
 BURST = (0.008, 0.025)       # [s] the second real-time process: busy up to this long, this often
 
@@ -64,7 +72,23 @@ def apex_errors(rows) -> list[float]:
     return errors
 
 
-def one_run(index: int, fifo: bool, forced: bool = False) -> dict:
+def record_bag(folder: Path, env: dict):
+    """`hopper bag record` of BAG_TOPICS into folder/bag, in a session of its own (stopped as Ctrl-C would)."""
+    return subprocess.Popen([sys.executable, "-m", "hopper_ros.cli", "bag", "record", "-o", str(folder / "bag"),
+                             *BAG_TOPICS], cwd=REPO, env=env, stdout=open(folder / "recorder.log", "w"),
+                            stderr=subprocess.STDOUT, start_new_session=True)
+
+
+def stop_bag(recorder) -> None:
+    os.killpg(recorder.pid, signal.SIGINT)
+    try:
+        recorder.wait(30)
+    except subprocess.TimeoutExpired:
+        os.killpg(recorder.pid, signal.SIGKILL)
+        recorder.wait()
+
+
+def one_run(index: int, fifo: bool, forced: bool = False, bag: bool = False) -> dict:
     label = 'forced_1khz' if forced else 'fifo' if fifo else 'normal'
     folder = OUT / f"run_{index:02d}_{label}"
     shutil.rmtree(folder, ignore_errors=True)
@@ -82,6 +106,7 @@ def one_run(index: int, fifo: bool, forced: bool = False) -> dict:
     argv = [sys.executable, "-m", "hopper_ros.cli", "demo", "--strides", str(STRIDES), "-o", str(folder)]
     # as `make demo` runs it: on SCHED_FIFO its rehearsal chooses 1 kHz or 500 Hz (--rate auto)
     argv += ["--rate", "1000"] if forced else [] if fifo else ["--normal-scheduling"]
+    recorder = record_bag(folder, env) if bag else None
     started = time.monotonic()
     with Load(profile(fifo), stall_target=sim_pid, seed=index) as load, \
             open(folder / "demo.out", "w", encoding="utf-8") as out:
@@ -90,6 +115,8 @@ def one_run(index: int, fifo: bool, forced: bool = False) -> dict:
                                     timeout=RUN_TIMEOUT).returncode
         except subprocess.TimeoutExpired:
             status = -1
+    if recorder is not None:
+        stop_bag(recorder)
     with open(folder / "strides.csv", newline="", encoding="utf-8") as handle:
         rows = list(csv.DictReader(handle))
     health = json.loads((folder / "health.json").read_text()) if (folder / "health.json").exists() else {}
@@ -127,6 +154,8 @@ def figures(runs: list[dict], suffix: str) -> list[dict]:
         {"name": f"demo_stances_ramp_late_under_load{suffix}", "value": total("stances_torque_late"),
          "unit": "stances (onset > 5 ms)"},
         {"name": f"demo_torque_onset_max_ms_under_load{suffix}", "value": worst("torque_onset_max_ms"), "unit": "ms"},
+        {"name": f"demo_torque_early_max_ms_under_load{suffix}", "value": worst("torque_early_max_ms"),
+         "unit": "ms (a ramp's torque on the leg before its touchdown)"},
         {"name": f"demo_ramps_begun_late_under_load{suffix}", "value": total("ramps_begun_late"),
          "unit": "ramps that reached the driver after their start"},
         {"name": f"demo_ramp_late_max_ms_under_load{suffix}", "value": worst("ramp_late_max_ms"), "unit": "ms"},
@@ -145,9 +174,13 @@ def figures(runs: list[dict], suffix: str) -> list[dict]:
     ]
 
 
-def run(quick=False):
+def run(quick=False, group=None, runs_of_group=None, bag=False):
     fifo_runs, normal_runs, forced_runs = ((QUICK_RUNS_FIFO, QUICK_RUNS_NORMAL, QUICK_RUNS_FORCED) if quick
                                            else (RUNS_FIFO, RUNS_NORMAL, RUNS_FORCED))
+    if group is not None:
+        counts = {"fifo": fifo_runs, "normal": normal_runs, "forced": forced_runs}
+        counts = {name: (runs_of_group or count) if name == group else 0 for name, count in counts.items()}
+        fifo_runs, normal_runs, forced_runs = counts["fifo"], counts["normal"], counts["forced"]
     OUT.mkdir(parents=True, exist_ok=True)
     allowed, why = realtime_scheduling_allowed()
     if not allowed:
@@ -159,7 +192,7 @@ def run(quick=False):
         for index in range(fifo_runs + normal_runs + forced_runs):
             forced = index >= fifo_runs + normal_runs
             fifo = (index < fifo_runs or forced) and allowed
-            result = one_run(index, fifo, forced)
+            result = one_run(index, fifo, forced, bag)
             runs.append(result)
             record.write(json.dumps(result) + "\n")
             record.flush()
@@ -173,7 +206,7 @@ def run(quick=False):
     counted = [r for r in runs if not r["forced_1khz"]]
     fifo_results = [r for r in counted if r["fifo"]]
     normal_results = [r for r in counted if not r["fifo"]]
-    out = figures(counted, "")
+    out = figures(counted, "") if counted else []
     if fifo_results:
         out += figures(fifo_results, "_fifo")
     if normal_results:
@@ -187,5 +220,13 @@ def run(quick=False):
 
 
 if __name__ == "__main__":
-    for figure in run(quick="--quick" in sys.argv):
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--group", choices=("fifo", "normal", "forced"), help="run this group only")
+    parser.add_argument("--runs", type=int, help="runs of --group (default: the bench's)")
+    parser.add_argument("--bag", action="store_true", help="record each run's loop topics and the robot's truth")
+    arguments = parser.parse_args()
+    for figure in run(arguments.quick, arguments.group, arguments.runs, arguments.bag):
         print(figure)

@@ -145,3 +145,39 @@ def test_a_freeze_withholds_the_answers_of_the_syncs_sent_meanwhile_and_of_no_la
     finally:
         master.shutdown()
         drive_bus.shutdown()
+
+
+def test_a_stand_still_is_counted_against_the_answers_in_transit_just_before_it():
+    """Answers that come a SYNC period after their SYNC (a loaded host: one always in transit) once answered on
+    time long before: the floor was the fewest unanswered ever (none in transit), and each stand-still counted one
+    SYNC over (bench_demo_load --bag: the driver's count 1-5 ms over the world's freeze at 500 Hz). Counted against
+    the last SETTLE before the silence, it is the SYNCs the robot never saw."""
+    stillness = DriveStillness(PERIOD, 0.0)
+    run(stillness, 50, 0.0, deliver=lambda k, now: now + 0.0004)          # on time, once
+    run(stillness, 100, 0.05, deliver=lambda k, now: now + 0.0014)        # from then on a period in transit
+
+    def answer(k):
+        return not 10 <= k < 90           # 80 SYNCs the robot never saw
+
+    said = run(stillness, 200, 0.15, answer=answer, deliver=lambda k, now: now + 0.0014)
+    assert [s for s in said if s is not None] == [pytest.approx(0.08)]
+
+
+def test_a_frozen_drive_answers_the_sync_of_the_period_it_stopped_in_and_says_how_many_it_never_will():
+    """The simulated robot stops between two of its steps: the SYNC sent in that period came before its world stood
+    still and is answered at the step that runs first (sim/runner.py); the others are not, and their count is the
+    time its world stands still."""
+    drive, master, drive_bus = emulator_pair()
+    try:
+        for k in range(5):
+            master.send(sync_frame())
+            drive.poll(0.001 + k * PERIOD)
+        assert answers(master) == 5
+        for _ in range(7):
+            master.send(sync_frame())
+        assert drive.discard_syncs(1) == 6
+        drive.poll(0.02)
+        assert answers(master) == 1 and drive.counters.syncs_missed == 6
+    finally:
+        master.shutdown()
+        drive_bus.shutdown()

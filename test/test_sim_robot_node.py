@@ -272,6 +272,26 @@ def test_a_late_stance_after_one_in_time_is_said_without_killing_the_stepping_th
     assert (sim_node.stances.stances, sim_node.stances.late) == (3, 1)
 
 
+def test_a_ramp_on_the_leg_before_its_touchdown_is_measured_and_said(sim_node):
+    """A stance ramp whose torque reached the leg in the flight (a setting the simulated robot took a period before
+    it was sent: bench_demo_load at 500 Hz) shows no late onset; its lead before the touchdown is measured, said at
+    info or as a warning by its size, one after the other from one call site."""
+    for early in ((SAID_AFTER + LATE_AFTER) / 2, 2 * LATE_AFTER, 0.0):
+        sample = sim_node.robot.step(False)
+        truth = sample.truth
+        motion = {name: getattr(truth, name) for name in ("t", "y", "z", "ydot", "zdot", "leg_angle")}
+        flight = dataclasses.replace(truth, hip_torque=5.0 if early else 0.0)
+        sim_node._emit(dataclasses.replace(sample, truth=flight, events=[]))
+        touchdown = dataclasses.replace(truth, t=truth.t + early, hip_torque=5.0)
+        sim_node._emit(dataclasses.replace(sample, truth=touchdown,
+                                           events=[PlantEvent(**(motion | {"t": touchdown.t}), kind="touchdown")]))
+        assert sim_node.stances.early == pytest.approx(early)
+        ended = dataclasses.replace(truth, t=truth.t + 0.1)
+        sim_node._emit(dataclasses.replace(sample, truth=ended, events=[PlantEvent(**(motion | {"t": ended.t}),
+                                                                                    kind="liftoff")]))
+    assert sim_node.stances.early_max == pytest.approx(2 * LATE_AFTER) and sim_node.stances.late == 0
+
+
 def test_a_stepping_thread_that_raises_ends_the_node_with_a_failure(sim_node):
     assert not sim_node.finished
     sim_node.runner._on_failure(RuntimeError("a step raised"))

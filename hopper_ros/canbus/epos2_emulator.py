@@ -79,8 +79,8 @@ class Epos2Emulator:
         self._table = od.object_dictionary(self.node_id)
         self._indices = {index for index, _ in self._table}
         self.counters = Counters()
-        self._held: deque[can.Message] = deque()   # frames queued while the drive stood still (discard_syncs):
-                                                    # handled first, their SYNCs never answered
+        self._held: deque[tuple[can.Message, bool]] = deque()   # frames queued while the drive stood still
+                                                    # (discard_syncs), handled first: (frame, its SYNC unanswered)
         self.regulator = PositionRegulator.from_hardware(hardware)
         self._values: dict[tuple[int, int], int | str] = {}
         self.sdo = SdoServer(self.node_id, self, self._send, self.counters, MAX_SEGMENTED_SIZE)
@@ -179,8 +179,7 @@ class Epos2Emulator:
         (the simulated robot catching up on a short stall runs one SYNC period a step, the drive then
         applying each RPDO at its own SYNC as it would have on time)."""
         while True:
-            unseen = bool(self._held)
-            msg = self._held.popleft() if unseen else self._receive()
+            msg, unseen = self._held.popleft() if self._held else (self._receive(), False)
             if msg is None:
                 return
             try:
@@ -190,7 +189,7 @@ class Epos2Emulator:
                 self.counters.malformed_frames += 1
                 log.exception("EPOS2 emulator: frame %s not handled", msg)
 
-    def discard_syncs(self) -> None:
+    def discard_syncs(self, answered: int = 0) -> int:
         """The drive stood still (the simulated robot's process stopped and its world with it): every
         frame queued for it now came meanwhile. They are handled in order at the next polls, but none of
         their SYNCs is answered (`counters.syncs_missed`), as a drive that stood still never saw them; the
@@ -200,9 +199,17 @@ class Epos2Emulator:
         that came after the drive woke held the stance ramp's current back (test_drive_stillness; suspected
         in a loaded 500 Hz run's torque 5.7 ms after a touchdown, docs/sim.md). The owner first has the
         transport take in what has reached it (the hub's `read_pending`); a frame its sender still held
-        comes after and is answered, the stand-still counted that much short."""
+        comes after and is answered, the stand-still counted that much short. The first `answered` SYNCs queued
+        came before the world stood still (the period it stopped in, whose step never ran): they are answered
+        (all discarded, the driver's count of a stand-still ran 1-5 ms over the time the world stood still,
+        2 ms on average at 500 Hz: bench_demo_load with --bag, docs/sim.md). Returns how many will not be."""
+        for_the_period, unanswered = answered, 0
         while (msg := self._receive()) is not None:
-            self._held.append(msg)
+            is_sync = msg.arbitration_id == int(self._values[(od.COB_ID_SYNC, 0)]) & od.COB_ID_MASK_11BIT
+            self._held.append((msg, not for_the_period))
+            unanswered += is_sync and not for_the_period
+            for_the_period -= bool(is_sync and for_the_period)
+        return unanswered
 
     def _receive(self) -> can.Message | None:
         """The next frame on the bus, None when none is pending."""

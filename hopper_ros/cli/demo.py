@@ -352,6 +352,7 @@ def loop_health(health: dict, at_throw: dict | None = None, gap_max: dict | None
         "stances_without_torque": value("sim_robot", "stances_without_torque"),
         "stances_torque_late": value("sim_robot", "stances_torque_late"),
         "torque_onset_max_ms": 1e3 * value("sim_robot", "torque_onset_max_s"),
+        "torque_early_max_ms": 1e3 * value("sim_robot", "torque_early_max_s"),
         "sim_resyncs": value("sim_robot", "resyncs"),
         "published_gap_p99_ms": 1e3 * value("deadbeat_controller", "command_gap_p99_s"),
         "published_gap_max_ms": 1e3 * gap_max.get("deadbeat_controller", value("deadbeat_controller", "command_gap_max_s")),

@@ -105,6 +105,7 @@ class SimRobotNode(Node):
         self.failed = False                         # ... with status 1 (the stepping thread raised)
         self.counters = self.runner.counters
         self.stances = StanceTorque()
+        self._freezes_said = 0
         self._stamp_origin_ns = self.get_clock().now().nanoseconds
         effects = [f"{name} {value:g}" for name, value in config.enabled_effects().items()]
         address = self.runner.udp_address
@@ -148,9 +149,18 @@ class SimRobotNode(Node):
             state.y, state.z, state.y_dot, state.z_dot = truth.y, truth.z, truth.ydot, truth.zdot
             state.leg_angle, state.leg_angle_rate = truth.leg_angle, truth.leg_rate
             self._truth.publish(state)
+        if self.runner.counters["resyncs"] != self._freezes_said:
+            self._freezes_said = self.runner.counters["resyncs"]
+            at, length = self.runner.last_freeze
+            self.get_logger().info(f"the world stood still for {length * 1e3:.1f} ms at t = {at:.3f} s (this process "
+                                   "was stopped or starved: sim/runner.py RESYNC_AFTER)")
         stances = self.stances
         closed = stances.stances
         stances.add(sample, self.robot.current_mode, self.runner.behind)
+        if stances.early > SAID_AFTER and any(event.kind == "touchdown" for event in sample.events):
+            log_event(self.get_logger(), "warning" if stances.early > stances.late_after else "info",
+                      f"touchdown at t = {truth.t:.3f} s: the ramp torque reached the leg {stances.early * 1e3:.1f} ms "
+                      "before it (in the flight)")
         if stances.stances > closed and not stances.onsets[-1] <= SAID_AFTER:
             onset, behind = stances.onsets[-1], stances.behind
             level = "info" if onset <= stances.late_after else "warning"
@@ -188,7 +198,8 @@ class SimRobotNode(Node):
     def _report(self) -> None:
         counters = self.runner.all_counters() | self.stances.counters()
         self._diagnostics.report(counters, {"sim_time_s": self.robot.t, "realtime_factor": self.runner.realtime_factor(),
-                                            "torque_onset_max_s": self.stances.onset_max},
+                                            "torque_onset_max_s": self.stances.onset_max,
+                                            "torque_early_max_s": self.stances.early_max},
                                  "the robot fell" if counters["falls"] else "", WARN if counters["falls"] else OK)
 
     def destroy_node(self):

@@ -137,14 +137,19 @@ class SimRobot:
         offset, saturation, and the lag) makes the torque that reaches the leg of it."""
         return self.motor.torque(current)
 
-    def step(self, catching_up: bool = False) -> SimSample:
+    def step(self, catching_up: bool = False, at_substep: Callable[[float], None] | None = None) -> SimSample:
         """One sample period: the drive's loop periods within it, then the packet of its end.
 
         `catching_up`: the period runs late, behind a stall of the process (sim/runner.py): the drive
-        takes the frames of one SYNC period only, as it would have on time."""
+        takes the frames of one SYNC period only, as it would have on time. `at_substep(offset)`, called
+        before each loop period after the first with its offset into the period [s] (not catching up):
+        the real-time runner waits for that instant, so that the drive takes the frames that came by then
+        at its own loop period, not all at the period's start."""
         events: list[PlantEvent] = []
         for substep in range(self._substeps):
             poll = "one_sync" if catching_up and substep == 0 else "none" if catching_up else "all"
+            if at_substep is not None and substep and not catching_up:
+                at_substep(substep * self.period / self._substeps)
             events += self._advance(self.period / self._substeps, poll)
         if self.experiment is not None:
             self.experiment.on_events(events)

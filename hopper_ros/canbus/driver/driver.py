@@ -44,7 +44,7 @@ from . import cia402
 from .cia402 import FAULT_STATES, FaultReset
 from .received import ReceivedFrames
 from .sequence import StartupAndShutdown
-from .skipped import SkippedImpulse
+from .skipped import SentTorque, SkippedImpulse
 from .settings import (COUNTER_NAMES, ERROR, INFO, MODE_CURRENT, MODE_DISABLED, MODE_NAMES, MODE_POSITION, MODE_RAMP,
                        WARN, DriveConfig, DriverSettings)
 from .startup import RPDO_MAPPINGS, TPDO_MAPPINGS
@@ -116,6 +116,8 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         # MODE_RAMP: (tau_0, duration, start, stamp): start = the stamp (or later) + the time the robot stood still
         self._ramp: tuple[float, float, float, float] | None = None
         self._interrupted: tuple[float, float, float, float] | None = None   # the ramp a watchdog stop ended
+        self._ramp_torque = 0.0             # [N m] the latest ramp setting
+        self._sent_torque = SentTorque()    # what the drive was sent for the present ramp (a late start owes the rest)
         self._skipped = SkippedImpulse(abs(self.units.torque(self.units.current_limit - 0.001)),   # 1 mA inside
                                        settings.sync_period)
         # the ramp setting the drive holds until the next RPDO: (sent at, the ramp's part of it [N m], the ramp's start
@@ -191,6 +193,7 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                     # then), unless the command came late: a ramp skipped is energy lost
                     start = max(stamp + self.frozen_after(stamp, now), now - self.settings.max_ramp_age)
                     self._ramp = (setpoint, duration, start, stamp)
+                    self._sent_torque.reset()
                     self._held = self.stillness.pending(now, stamp)
                     self._follows = self.stillness.covers(stamp)
                     self._note_late_ramp(now, start, "the command came after its touchdown")
@@ -200,8 +203,10 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                     self._ramp = (setpoint, duration, stamp + self.frozen_after(stamp, now), stamp)
                     self._held = self.stillness.pending(now, stamp)
                     self._follows = self.stillness.covers(stamp)
-                    if not began:
-                        self._note_late_ramp(now, self._ramp[2], "the touchdown came before its prediction")
+                    if not began:       # (as the driver counted: the drive may have been sent the ramp since)
+                        self._note_late_ramp(now, self._ramp[2], "the touchdown came before its prediction",
+                                             self._sent_torque.between(self._ramp[2], now,
+                                                                       self.stillness.unanswered_span(now)))
                 self._current_ma = self._current_setting(self._ramp_setting(now))
             else:
                 self._position_qc = self._position_setting(setpoint)
@@ -460,16 +465,20 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
             self._follows = False
         if settled:
             self._event(WARN, f"the drive stood still for {settled * 1e3:.0f} ms ({settled / self.settings.sync_period:.0f} "
-                              "SYNCs never answered: the simulated robot's process stopped?): the stance ramp "
-                              "moved by that")
+                              f"SYNCs never answered, no answer for {self.stillness.last_silence * 1e3:.1f} ms: the "
+                              "simulated robot's process stopped?): the stance ramp moved by that")
 
-    def _note_late_ramp(self, now: float, start: float, why: str) -> None:
-        """A ramp whose start had passed when it reached the driver: the impulse of its first `now - start`
-        is given as the current limit allows (skipped.py). More than a SYNC period late is counted and said,
-        so that a stride that misses its apex shows where its torque was late."""
-        late = now - start
-        self._skipped.begin(late, float(self._ramp[0]), float(self._ramp[1]))
+    def _note_late_ramp(self, now: float, start: float, why: str, given: float = 0.0) -> None:
+        """A ramp whose start had passed when it reached the driver: the impulse of its first `now - start`,
+        less what the drive was `given` since the start [N m s], is given as the current limit allows
+        (skipped.py). More than a SYNC period's worth missed is counted and said, so that a stride that misses
+        its apex shows where its torque was late."""
+        tau_0, duration = float(self._ramp[0]), float(self._ramp[1])
+        self._skipped.begin(now - start, tau_0, duration)
+        self._skipped.owe(-given)
         self._hold = None                   # what the drive held until now is in `late`
+        missed = self._skipped.owed
+        late = now - start if not given else max(0.0, -missed / tau_0) if tau_0 else 0.0   # [s] at tau_0: its start's
         if late > self.settings.sync_period:
             self.counters["ramps_begun_late"] += 1
             self.ramp_late_max = max(self.ramp_late_max, late)
@@ -491,7 +500,8 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
     def _rpdo_frame(self, number: int, controlword: int, at_sync: bool = False) -> can.Message:
         if number == 1:
             if self._mode == MODE_RAMP and self._ramp is not None:
-                self._current_ma = self._current_setting(self._ramp_setting(self.clock(), at_sync))
+                self._ramp_torque = self._ramp_setting(self.clock(), at_sync)
+                self._current_ma = self._current_setting(self._ramp_torque)
             setting = self._current_ma if (self._want_enabled and self._mode in (MODE_CURRENT, MODE_RAMP)) else 0
             values = (controlword, OperationMode.CURRENT, setting)
         else:
@@ -516,6 +526,8 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
             self._sent_since_sync = key
             self._last_rpdo, self._last_rpdo_time = key, now
             self._hold = (now, self._ramp_part, self._ramp[2]) if ramp and self._want_enabled and self.enabled else None
+            if ramp:
+                self._sent_torque.add(now, self._ramp_torque if self._want_enabled and self.enabled else 0.0)
 
     def _book_hold(self, now: float) -> None:
         """Book the ramp's part of a setting chosen at the touchdown and held longer than HOLD_BOOKED periods

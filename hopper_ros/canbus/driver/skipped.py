@@ -5,7 +5,10 @@ measured touchdown came before the predicted one it waited for) misses its first
 (tau_0 ~11 N m, the drive's limit 12.5 N m) each ms missed moved the next apex by ~4 mm; given on top of the
 ramp as soon as the limit allows, 2 ms late moves it ~1 mm, 3 ms ~2.4 mm (docs/motor_driver.md).
 A touchdown's setting the drive held longer than its period (the driver's own cycle stalled: the drive holds
-each current until the next RPDO) is booked here too (`owe`).
+each current until the next RPDO) is booked here too (`owe`). `SentTorque` keeps what the drive was sent for a
+ramp, so that what a late start owes is the ramp's impulse less what was given (a ramp whose start the count of
+a stand-still had moved ahead of the measured touchdown had its torque on the leg from the touchdown on: owed in
+full, it was paid twice at the current limit, the apex 0.75 cm off: bench_demo_load --bag, docs/motor_driver.md).
 """
 
 from __future__ import annotations
@@ -51,3 +54,33 @@ class SkippedImpulse:
                 self.owed = 0.0
         setting = torque + self.extra
         return setting if setting * torque >= 0.0 else 0.0     # less, down to none: never the other sign
+
+
+class SentTorque:
+    """The settings a ramp was sent, each held by the drive until the next: the impulse given between two instants."""
+
+    KEPT = 512          # settings kept (a ramp is tens of SYNC periods; a held one may run longer)
+
+    def __init__(self) -> None:
+        self._sent: list[tuple[float, float]] = []     # (when, hip torque [N m])
+
+    def reset(self) -> None:
+        self._sent.clear()
+
+    def add(self, at: float, torque: float) -> None:
+        if self._sent and self._sent[-1][1] == torque:
+            return                                     # held on: the same setting
+        self._sent.append((at, torque))
+        if len(self._sent) > self.KEPT:
+            del self._sent[:-self.KEPT // 2]
+
+    def between(self, begin: float, end: float, unanswered: tuple[float, float] = (0.0, 0.0)) -> float:
+        """[N m s] The impulse the settings gave from `begin` to `end`, none in the span `unanswered` (the drive
+        answered no SYNC: the simulated robot stood still, and took the last setting of that span when it woke)."""
+        given = 0.0
+        for index, (at, torque) in enumerate(self._sent):
+            until = min(self._sent[index + 1][0] if index + 1 < len(self._sent) else end, end)
+            at = max(at, begin)
+            overlap = max(0.0, min(until, unanswered[1]) - max(at, unanswered[0]))
+            given += torque * (max(0.0, until - at) - overlap)
+        return given

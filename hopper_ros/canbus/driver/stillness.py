@@ -22,6 +22,7 @@ they come. So:
 from __future__ import annotations
 
 import math
+from collections import deque
 
 SILENT_PERIODS = 3      # no answer for this many SYNC periods: silent (the robot may stand still)
 FROZEN_AFTER = 0.025    # [s] silent this long: the robot stands still (past sim/runner.py RESYNC_AFTER, 20 ms,
@@ -45,8 +46,13 @@ class DriveStillness:
         self._settling_until = -math.inf          # a silence ended: its late answers still coming
         self._least_unanswered: int | None = None  # while settling
         self._floor: int | None = None            # SYNCs known never to be answered (start-up, standing still)
+                                                  #   and the fewest in transit over the last SETTLE (the same
+                                                  #   window as the one a silence's count is taken over)
+        self._recent: deque[tuple[float, int]] = deque()   # (when, SYNCs unanswered) over the last SETTLE
         self._silences: list[tuple[float, float]] = []   # (when it ended, how long it stood still)
         self._ended = now                         # the first answer after the last silence
+        self.last_silence = 0.0                   # [s] the last silence, from the answer before it to the one after
+        self.silence_span = (-math.inf, -math.inf)   # [s] (the answer before, the one after) the last silence
         self.reflected = False                    # the latest stand-still is in the sensing clock's stamps
         self._last_stood_still = -math.inf        # when the latest stand-still ended (reflected or not)
         self._answering_since: float | None = None   # the first answer of the present run of answers
@@ -96,6 +102,13 @@ class DriveStillness:
         that whole time early."""
         return sum(frozen for ended, frozen in self._silences if ended > stamp) + self.pending(now, stamp)
 
+    def unanswered_span(self, now: float) -> tuple[float, float]:
+        """[s] From the answer before the present silence (or the last one) to the answer after it (now while it
+        lasts): when what the drive was sent may not have reached a robot that ran."""
+        if self._silence_began is not None:
+            return self._silence_began, now
+        return self.silence_span
+
     def stood_still_lately(self, now: float) -> bool:
         """Whether the robot may have stood still lately: its drive not answering every SYNC for the last
         STOOD_STILL_LATELY (starting, silent now, a silence's count still settling, our own cycle stalled within
@@ -130,18 +143,24 @@ class DriveStillness:
         if quiet:
             self._answering_since = None
         if quiet and self._silence_began is None:
+            self._recent.clear()                    # the floor stays the one just before the silence
             result = self._settle() if self._least_unanswered is not None else None
             self._silence_began, self.reflected = self._last_answer, False
             return result
         if quiet:
             return None
         if self._silence_began is not None:           # answers again: their backlog may still be coming
+            self.last_silence = self._last_answer - self._silence_began
+            self.silence_span = (self._silence_began, self._last_answer)
             self._silence_began, self._settling_until = None, now + SETTLE
             self._least_unanswered = unanswered
             self._ended = self._last_answer
             return None
         if self._least_unanswered is None:
-            self._floor = min(self._floor, unanswered)
+            self._recent.append((now, unanswered))
+            while self._recent[0][0] < now - SETTLE:
+                self._recent.popleft()
+            self._floor = min(u for _, u in self._recent)
             return None
         self._least_unanswered = min(self._least_unanswered, unanswered)
         return self._settle() if now >= self._settling_until else None
