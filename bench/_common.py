@@ -2,6 +2,8 @@
 import contextlib
 import math
 import os
+import signal
+import subprocess
 import time
 from pathlib import Path
 
@@ -186,3 +188,16 @@ def child_role(roles):
     if sys.argv[1] not in roles:
         raise SystemExit(f"unknown role {sys.argv[1]}")
     roles[sys.argv[1]](*sys.argv[2:])
+
+
+def stop_recorder(recorder: subprocess.Popen, timeout: float) -> None:
+    """Stop a `hopper bag record` started in a session of its own as Ctrl-C would (it closes the bag), killed if it
+    does not end within `timeout` seconds."""
+    if recorder.poll() is not None:
+        return
+    os.killpg(recorder.pid, signal.SIGINT)
+    try:
+        recorder.wait(timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(recorder.pid, signal.SIGKILL)
+        recorder.wait()

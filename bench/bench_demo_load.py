@@ -30,16 +30,14 @@ run with `hopper bag record` into its folder's bag/ (what a stride that missed i
 import csv
 import json
 import math
-import os
 import re
-import signal
 import shutil
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from _common import REPO, child_env  # noqa: E402 (bench/ is on sys.path)
+from _common import REPO, child_env, stop_recorder  # noqa: E402 (bench/ is on sys.path)
 from _load import Load, LoadProfile  # noqa: E402
 
 sys.path.insert(0, str(REPO))
@@ -79,14 +77,6 @@ def record_bag(folder: Path, env: dict):
                             stderr=subprocess.STDOUT, start_new_session=True)
 
 
-def stop_bag(recorder) -> None:
-    os.killpg(recorder.pid, signal.SIGINT)
-    try:
-        recorder.wait(30)
-    except subprocess.TimeoutExpired:
-        os.killpg(recorder.pid, signal.SIGKILL)
-        recorder.wait()
-
 
 def one_run(index: int, fifo: bool, forced: bool = False, bag: bool = False) -> dict:
     label = 'forced_1khz' if forced else 'fifo' if fifo else 'normal'
@@ -116,7 +106,7 @@ def one_run(index: int, fifo: bool, forced: bool = False, bag: bool = False) -> 
         except subprocess.TimeoutExpired:
             status = -1
     if recorder is not None:
-        stop_bag(recorder)
+        stop_recorder(recorder, 30.0)
     with open(folder / "strides.csv", newline="", encoding="utf-8") as handle:
         rows = list(csv.DictReader(handle))
     health = json.loads((folder / "health.json").read_text()) if (folder / "health.json").exists() else {}

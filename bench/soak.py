@@ -25,7 +25,6 @@ import json
 import os
 import re
 import shutil
-import signal
 import subprocess
 import sys
 import time
@@ -36,6 +35,7 @@ sys.path.insert(0, str(REPO))
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 from hopper_ros.runtime.environment import apply_ros_environment, free_domain_id, restore_default_stop_signals  # noqa: E402
+from _common import stop_recorder  # noqa: E402 (bench/ is on sys.path)
 
 TOPICS = ("body_state", "gait_event", "apex", "stride_command", "motor_command", "motor_status", "/diagnostics")
 WARM_UP = 60.0       # [s] after the throw: the memory taken as the start
@@ -51,18 +51,6 @@ def rss_mb(pid: int) -> float:
     except OSError:
         pass
     return float("nan")
-
-
-def _stop(recorder: subprocess.Popen) -> None:
-    """Stop the bag recorder as Ctrl-C would (it closes the bag), killed if it does not end within a minute."""
-    if recorder.poll() is not None:
-        return
-    os.killpg(recorder.pid, signal.SIGINT)
-    try:
-        recorder.wait(60)
-    except subprocess.TimeoutExpired:
-        os.killpg(recorder.pid, signal.SIGKILL)
-        recorder.wait()
 
 
 def main() -> int:
@@ -122,7 +110,7 @@ def main() -> int:
         print(f"soak: interrupted; the recording so far is in {out / 'bag'}", file=sys.stderr)
         return 130
     finally:            # the recorder has a session of its own: an interrupt or an early return does not reach it
-        _stop(recorder)
+        stop_recorder(recorder, 60.0)   # as Ctrl-C would: it closes the bag
     topics = [DROPPED.match(line) for line in (out / "recorder.log").read_text().splitlines()]
     messages = sum(int(m.group(2)) for m in topics if m)
     dropped = sum(int(m.group(3)) for m in topics if m)
