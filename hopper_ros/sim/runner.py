@@ -1,8 +1,8 @@
 """The simulated robot run as the robot runs: its own thread steps the physics once per period
 (on the wall clock in `realtime` mode, as fast as it goes in `lockstep`; a stall of the process of more
-than RESYNC_AFTER freezes the simulated world for its length, its drive answering none of the SYNCs
-that came meanwhile, as the driver expects; a shorter one is caught up), sends the
-microcontroller's UDP packet to the encoder bridge on loopback and hands every period's sample to
+than RESYNC_AFTER freezes the simulated world for the SYNC periods that came meanwhile, its drive answering
+none of them, as the driver expects; a shorter one is caught up), sends the microcontroller's UDP packet of
+each period at its end to the encoder bridge on loopback and hands every period's sample to
 the caller (the sim_robot node publishes its force plate, truth and events). The emulated EPOS2
 sits on the CAN transport the `can` setting names, the motor driver's own selection
 (canbus.driver.bus). No ROS import."""
