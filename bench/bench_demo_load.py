@@ -215,7 +215,12 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--group", choices=("fifo", "normal", "forced"), help="run this group only")
-    parser.add_argument("--runs", type=int, help="runs of --group (default: the bench's)")
+    def positive(text):
+        if not text.isdigit() or int(text) < 1:
+            raise argparse.ArgumentTypeError(f"--runs must be a whole number of runs, 1 or more, not {text!r}")
+        return int(text)
+
+    parser.add_argument("--runs", type=positive, help="runs of --group (default: the bench's)")
     parser.add_argument("--bag", action="store_true", help="record each run's loop topics and the robot's truth")
     arguments = parser.parse_args()
     for figure in run(arguments.quick, arguments.group, arguments.runs, arguments.bag):

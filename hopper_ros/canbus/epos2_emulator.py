@@ -205,11 +205,15 @@ class Epos2Emulator:
         2 ms on average at 500 Hz: bench_demo_load with --bag, docs/sim.md). Returns how many will not be."""
         for_the_period, unanswered = answered, 0
         while (msg := self._receive()) is not None:
-            is_sync = msg.arbitration_id == int(self._values[(od.COB_ID_SYNC, 0)]) & od.COB_ID_MASK_11BIT
+            is_sync = msg.arbitration_id == self._sync_cob()
             self._held.append((msg, not for_the_period))
             unanswered += is_sync and not for_the_period
             for_the_period -= bool(is_sync and for_the_period)
         return unanswered
+
+    def _sync_cob(self) -> int:
+        """The SYNC's COB-ID as object 0x1005 sets it."""
+        return int(self._values[(od.COB_ID_SYNC, 0)]) & od.COB_ID_MASK_11BIT
 
     def _receive(self) -> can.Message | None:
         """The next frame on the bus, None when none is pending."""
@@ -236,7 +240,7 @@ class Epos2Emulator:
             return
         if cob == od.sdo_rx_cob_id(self.node_id):
             self.sdo.on_frame(data)
-        elif cob == int(self._values[(od.COB_ID_SYNC, 0)]) & od.COB_ID_MASK_11BIT:
+        elif cob == self._sync_cob():
             if unseen:
                 self.counters.syncs_missed += 1
                 return False

@@ -73,6 +73,7 @@ class SimRunner:
         self.udp_address = ("127.0.0.1", int(port))
         self.behind = 0.0        # [s] how far behind its clock the last period ran (real-time mode)
         self.last_freeze = (0.0, 0.0)   # [s] (the robot's time, how long its world stood still) of the latest freeze
+        self._period_start = 0.0        # [s] the present period's start on the wall clock (real-time mode)
         self.counters = {"periods": 0, "deadline_misses": 0, "resyncs": 0, "udp_errors": 0, "falls": 0, "strides": 0,
                          "throws": 0}          # falls, strides: counted by the caller, from the samples' events
         self._lock = threading.Lock()
@@ -117,15 +118,13 @@ class SimRunner:
         except Exception as exc:  # noqa: BLE001 - the caller decides; the thread has ended either way
             self._on_failure(exc)
 
-    def _substep_waiter(self, start: float) -> Callable[[float], None]:
-        """Wait until `offset` into the period begun at `start`, then hand the drive what reached it."""
-        def wait(offset: float) -> None:
-            pause = start + offset - time.monotonic()
-            if pause > 0.0:
-                time.sleep(pause)
-            if self.hub is not None:
-                self.hub.read_pending()
-        return wait
+    def _wait_for_substep(self, offset: float) -> None:
+        """Wait until `offset` into the present period, then hand the drive what reached it."""
+        pause = self._period_start + offset - time.monotonic()
+        if pause > 0.0:
+            time.sleep(pause)
+        if self.hub is not None:
+            self.hub.read_pending()
 
     def _publish(self, sample: SimSample) -> None:
         try:
@@ -187,7 +186,8 @@ class SimRunner:
                 self._publish(pending)
             if self.hub is not None:               # every frame that has reached the drive by now, whichever of
                 self.hub.read_pending()            #   this process's threads runs first (the hub's could wait a step)
-            pending = self.robot.step(catching_up, self._substep_waiter(deadline) if realtime else None)
+            self._period_start = deadline
+            pending = self.robot.step(catching_up, self._wait_for_substep if realtime else None)
             self.robot.plant.events.clear()      # the sample holds them: the plant's history grew without end
             self.counters["periods"] += 1        #   (0.4 kB an event, 40k an hour: the soak's memory growth)
             if not realtime:

@@ -464,8 +464,9 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
         if settled is not None:
             self._follows = False
         if settled:
+            began, ended = self.stillness.silence_span
             self._event(WARN, f"the drive stood still for {settled * 1e3:.0f} ms ({settled / self.settings.sync_period:.0f} "
-                              f"SYNCs never answered, no answer for {self.stillness.last_silence * 1e3:.1f} ms: the "
+                              f"SYNCs never answered, no answer for {(ended - began) * 1e3:.1f} ms: the "
                               "simulated robot's process stopped?): the stance ramp moved by that")
 
     def _note_late_ramp(self, now: float, start: float, why: str, given: float = 0.0) -> None:

@@ -51,7 +51,6 @@ class DriveStillness:
         self._recent: deque[tuple[float, int]] = deque()   # (when, SYNCs unanswered) over the last SETTLE
         self._silences: list[tuple[float, float]] = []   # (when it ended, how long it stood still)
         self._ended = now                         # the first answer after the last silence
-        self.last_silence = 0.0                   # [s] the last silence, from the answer before it to the one after
         self.silence_span = (-math.inf, -math.inf)   # [s] (the answer before, the one after) the last silence
         self.reflected = False                    # the latest stand-still is in the sensing clock's stamps
         self._last_stood_still = -math.inf        # when the latest stand-still ended (reflected or not)
@@ -150,7 +149,6 @@ class DriveStillness:
         if quiet:
             return None
         if self._silence_began is not None:           # answers again: their backlog may still be coming
-            self.last_silence = self._last_answer - self._silence_began
             self.silence_span = (self._silence_began, self._last_answer)
             self._silence_began, self._settling_until = None, now + SETTLE
             self._least_unanswered = unanswered
