@@ -191,11 +191,12 @@ def child_role(roles):
 
 
 def stop_recorder(recorder: subprocess.Popen, timeout: float) -> None:
-    """Stop a `hopper bag record` started in a session of its own as Ctrl-C would (it closes the bag), killed if it
-    does not end within `timeout` seconds."""
+    """Stop a `hopper bag record` started in a session of its own with SIGTERM (it closes the bag as on Ctrl-C),
+    killed if it does not end within `timeout` seconds. Not SIGINT: a bench started with `&` from a script passes
+    SIGINT on ignored, the recorder keeps it so, and its bag was killed without its footer."""
     if recorder.poll() is not None:
         return
-    os.killpg(recorder.pid, signal.SIGINT)
+    os.killpg(recorder.pid, signal.SIGTERM)
     try:
         recorder.wait(timeout)
     except subprocess.TimeoutExpired:

@@ -71,7 +71,7 @@ def apex_errors(rows) -> list[float]:
 
 
 def record_bag(folder: Path, env: dict):
-    """`hopper bag record` of BAG_TOPICS into folder/bag, in a session of its own (stopped as Ctrl-C would)."""
+    """`hopper bag record` of BAG_TOPICS into folder/bag, in a session of its own (stopped by `stop_recorder`)."""
     return subprocess.Popen([sys.executable, "-m", "hopper_ros.cli", "bag", "record", "-o", str(folder / "bag"),
                              *BAG_TOPICS], cwd=REPO, env=env, stdout=open(folder / "recorder.log", "w"),
                             stderr=subprocess.STDOUT, start_new_session=True)

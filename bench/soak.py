@@ -110,7 +110,7 @@ def main() -> int:
         print(f"soak: interrupted; the recording so far is in {out / 'bag'}", file=sys.stderr)
         return 130
     finally:            # the recorder has a session of its own: an interrupt or an early return does not reach it
-        stop_recorder(recorder, 60.0)   # as Ctrl-C would: it closes the bag
+        stop_recorder(recorder, 60.0)   # SIGTERM: it closes the bag
     topics = [DROPPED.match(line) for line in (out / "recorder.log").read_text().splitlines()]
     messages = sum(int(m.group(2)) for m in topics if m)
     dropped = sum(int(m.group(3)) for m in topics if m)

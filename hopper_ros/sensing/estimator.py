@@ -137,6 +137,12 @@ class ClockOffset:
     microcontroller time re-anchored it and only upwards: a simulated robot that skipped 50-150 ms
     left every stamp that much old for minutes (every stance ramp cancelled), late first packets
     left them ahead (every ramp held).
+
+    A mapping anchored within the last `reanchor_after` is brought down at once to the envelope when two
+    packets in a row, the second as far after the first as it was sampled, came more than `max_lag`
+    earlier than it allows: it was anchored on late packets (the first after a stand-still read by a
+    starved host; waiting `reanchor_after` for them left the stamps 6 ms late over a touchdown, its ramp
+    as late: bench_demo_load, the apex 1.09 cm off). Neither a lockstep stream nor a burst is at pace.
     """
 
     PACE = 1.1   # [1] a span whose microcontroller time advanced faster than this x host time is no real-time stream
@@ -156,11 +162,13 @@ class ClockOffset:
         self._least = math.inf                   # the span's least delay
         self._last_receive = 0.0
         self._after_silence: float | None = None  # delay of a late packet that ended a silence
+        self._anchored_at = -math.inf            # receive time of the last anchor
+        self._early = False                      # the last packet came earlier than a fresh anchor allows
 
     def update(self, mcu_time: float, receive_time: float) -> float:
         delay = receive_time - mcu_time
         if self._last_mcu is None:
-            self._anchor(delay)
+            self._anchor(delay, receive_time)
             self._last_mcu, self._last_receive = mcu_time, receive_time
             return self.offset
         mcu_step, host_step = mcu_time - self._last_mcu, receive_time - self._last_receive
@@ -168,10 +176,15 @@ class ClockOffset:
         self._last_mcu, self._last_receive = mcu_time, receive_time
         self.envelope = min(self.envelope + step, delay)
         side = 1 if delay - self.offset > self.max_error else -1 if self.offset - self.envelope > self.max_lag else 0
+        early = side < 0 and receive_time - self._anchored_at < self.reanchor_after
+        if early and self._early and mcu_step > 0.0 and host_step >= 0.5 * mcu_step:
+            self._anchor(self.envelope, receive_time)     # the fresh anchor was made on late packets
+            return self.offset
+        self._early = early
         if side > 0 and self._after_silence is not None and mcu_step > 0.0 and host_step >= 0.5 * mcu_step:
             # late after a silence, and the next packet came as far after it as it was sampled: the
             # stream goes on at its pace (a burst of queued packets comes within microseconds)
-            self._anchor(min(self._after_silence, delay))
+            self._anchor(min(self._after_silence, delay), receive_time)
             return self.offset
         self._after_silence = delay if side > 0 and host_step > self.reanchor_after else None
         if (side != self._side or host_step > self.reanchor_after
@@ -180,7 +193,7 @@ class ClockOffset:
             self._side, self._since, self._least = side, (mcu_time, receive_time), math.inf
         self._least = min(self._least, delay if side > 0 else self.envelope)
         if side and receive_time - self._since[1] >= self.reanchor_after:
-            self._anchor(self._least)
+            self._anchor(self._least, receive_time)
             return self.offset
         self.offset += max(-step, min(step, self.envelope - self.offset))
         return self.offset
@@ -191,10 +204,11 @@ class ClockOffset:
         stream goes on later by the time it missed (re-anchored then) or came in a burst (not)."""
         return self._after_silence is not None
 
-    def _anchor(self, delay: float) -> None:
+    def _anchor(self, delay: float, receive_time: float) -> None:
         self.offset = self.envelope = delay
         self.anchors += 1
-        self._side, self._least, self._after_silence = 0, math.inf, None
+        self._side, self._least, self._after_silence, self._early = 0, math.inf, None, False
+        self._anchored_at = receive_time
 
     def reset(self) -> None:
         self._last_mcu = None

@@ -199,14 +199,20 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                     self._note_late_ramp(now, start, "the command came after its touchdown")
                 elif abs(stamp - self._ramp[3]) > RAMP_RESTAMP:
                     # the same ramp under a new stamp (the measured touchdown after a predicted one)
-                    began = self._ramp[2] <= now
+                    counted = self._ramp[2]
                     self._ramp = (setpoint, duration, stamp + self.frozen_after(stamp, now), stamp)
                     self._held = self.stillness.pending(now, stamp)
                     self._follows = self.stillness.covers(stamp)
-                    if not began:       # (as the driver counted: the drive may have been sent the ramp since)
-                        self._note_late_ramp(now, self._ramp[2], "the touchdown came before its prediction",
-                                             self._sent_torque.between(self._ramp[2], now,
-                                                                       self.stillness.unanswered_span(now)))
+                    unanswered = self.stillness.unanswered_span(now)     # the last silence (to now in one)
+                    if counted > now or (self._ramp[2] < counted and counted >= unanswered[1]):
+                        # not begun, or begun after the touchdown where a stand-still's count put it, the drive
+                        # answering again: what the ramp owes from its new start is less what the drive was sent
+                        # since (host time: a ramp begun before a stand-still was sent its first part before the
+                        # re-anchored stamp, and would be owed it again)
+                        why = ("the touchdown came before its prediction" if counted > now else
+                               "the touchdown came before the start the stand-still's count gave it")
+                        self._note_late_ramp(now, self._ramp[2], why,
+                                             self._sent_torque.between(self._ramp[2], now, unanswered))
                 self._current_ma = self._current_setting(self._ramp_setting(now))
             else:
                 self._position_qc = self._position_setting(setpoint)
