@@ -204,11 +204,14 @@ class MotorDriver(ReceivedFrames, StartupAndShutdown):
                     self._held = self.stillness.pending(now, stamp)
                     self._follows = self.stillness.covers(stamp)
                     unanswered = self.stillness.unanswered_span(now)     # the last silence (to now in one)
-                    if counted > now or (self._ramp[2] < counted and counted >= unanswered[1]):
+                    if counted > now or (self._ramp[2] < counted and counted >= unanswered[1]
+                                         and not self._sent_torque.held_at(unanswered[1])):
                         # not begun, or begun after the touchdown where a stand-still's count put it, the drive
-                        # answering again: what the ramp owes from its new start is less what the drive was sent
-                        # since (host time: a ramp begun before a stand-still was sent its first part before the
-                        # re-anchored stamp, and would be owed it again)
+                        # answering again and its robot woken to no ramp torque: what the ramp owes from its new
+                        # start is less what the drive was sent since. Not otherwise: what the robot took is then
+                        # not what the host's clock says (a ramp begun before a stand-still was sent its first
+                        # part before the re-anchored stamp; a robot woken to a ramp's setting ran on it while it
+                        # caught up its world), and owed again it was paid twice
                         why = ("the touchdown came before its prediction" if counted > now else
                                "the touchdown came before the start the stand-still's count gave it")
                         self._note_late_ramp(now, self._ramp[2], why,

@@ -74,6 +74,15 @@ class SentTorque:
         if len(self._sent) > self.KEPT:
             del self._sent[:-self.KEPT // 2]
 
+    def held_at(self, instant: float) -> float:
+        """[N m] The setting the drive held at `instant` (the last sent before it; none before the first)."""
+        held = 0.0
+        for at, torque in self._sent:
+            if at >= instant:
+                break
+            held = torque
+        return held
+
     def between(self, begin: float, end: float, unanswered: tuple[float, float] = (0.0, 0.0)) -> float:
         """[N m s] The impulse the settings gave from `begin` to `end`, none in the span `unanswered` (the drive
         answered no SYNC: the simulated robot stood still, and took the last setting of that span when it woke)."""
