@@ -14,6 +14,7 @@ import itertools
 import math
 import threading
 import time
+from functools import partial
 
 import can
 import canopen
@@ -298,6 +299,21 @@ def _ramp_milliamps(tau_0, duration, since_start):
     return _milliamps(float(np.mean(np.where((times >= 0.0) & (times < duration), -tau_0 * (1.0 - times / duration), 0.0))))
 
 
+def _ramp_on_clock(r, tau_0, duration, stamp, clock_offset, steps):
+    """`steps` keep-alive repeats of a MODE_RAMP command stamped `stamp` on the sensing clock `clock_offset` names."""
+    for _ in range(steps):
+        r.step(1, command=(MODE_RAMP, tau_0, duration, r.clock.t + 0.001 - stamp, clock_offset))
+
+
+def _stand_still(r, ramp, stamp, stood):
+    """The robot stands still `stood` s (its drive answers no SYNC) while the ramp stamped `stamp` goes on; then it
+    wakes, the SYNCs it never saw discarded."""
+    r.drive_alive = False
+    ramp(stamp, 0.0, round(stood / SETTINGS.sync_period))
+    r.drive.discard_syncs()
+    r.drive_alive = True
+
+
 def _given(rpdos, until):
     """[mA s] What the drive gave from `rpdos` (time, number, values), each setting held until the next or `until`."""
     times = [t for t, _, _ in rpdos] + [until]
@@ -440,10 +456,7 @@ def test_a_touchdown_stamped_after_a_stand_still_starts_its_ramp_at_its_stamp(ri
     r.enable(torque=1.0)
     tau_0, duration, stood = 6.0, 0.05, 0.1
     predicted = r.clock.t + 0.015
-
-    def ramp(stamp, clock_offset, steps):
-        for _ in range(steps):
-            r.step(1, command=(MODE_RAMP, tau_0, duration, r.clock.t + 0.001 - stamp, clock_offset))
+    ramp = partial(_ramp_on_clock, r, tau_0, duration)
 
     ramp(predicted, 0.0, 5)
     r.drive_alive = False                                  # the robot stands still
@@ -470,16 +483,10 @@ def test_a_ramp_begun_where_a_stand_stills_count_put_it_and_restamped_earlier_ow
     r.enable(torque=1.0)
     tau_0, duration, stood = 9.0, 0.06, 0.1
     predicted = r.clock.t + 0.005
-
-    def ramp(stamp, clock_offset, steps):
-        for _ in range(steps):
-            r.step(1, command=(MODE_RAMP, tau_0, duration, r.clock.t + 0.001 - stamp, clock_offset))
+    ramp = partial(_ramp_on_clock, r, tau_0, duration)
 
     ramp(predicted, 0.0, 4)
-    r.drive_alive = False                                  # the robot stands still across the touchdown
-    ramp(predicted, 0.0, round(stood / SETTINGS.sync_period))
-    r.drive.discard_syncs()
-    r.drive_alive = True
+    _stand_still(r, ramp, predicted, stood)                # across the touchdown
     back = len(r.rpdos)
     ramp(predicted, 0.0, 4)
     counted = r.driver._ramp[2]
@@ -507,18 +514,12 @@ def test_a_stand_still_in_mid_stance_owes_nothing_once_the_stamps_re_anchor(rig,
     r.enable(torque=1.0)
     tau_0, duration, stood = 9.0, 0.06, 0.1
     touchdown = r.clock.t + 0.003
-
-    def ramp(stamp, clock_offset, steps):
-        for _ in range(steps):
-            r.step(1, command=(MODE_RAMP, tau_0, duration, r.clock.t + 0.001 - stamp, clock_offset))
+    ramp = partial(_ramp_on_clock, r, tau_0, duration)
 
     first = len(r.rpdos)
     ramp(touchdown, 0.0, steps_in)
     stopped, stopped_at = len(r.rpdos), r.clock.t
-    r.drive_alive = False                                  # the robot stands still in mid stance
-    ramp(touchdown, 0.0, round(stood / SETTINGS.sync_period))
-    r.drive.discard_syncs()
-    r.drive_alive = True
+    _stand_still(r, ramp, touchdown, stood)                # in mid stance
     back = len(r.rpdos)
     ramp(touchdown, 0.0, heard_after)
     anchored, restamped = len(r.rpdos), touchdown + stood - early
@@ -542,10 +543,7 @@ def test_a_sensing_clock_re_anchored_while_the_drive_answered_every_sync_moves_n
     r = rig().start()
     r.enable(torque=1.0)
     tau_0, duration, step = 6.0, 0.05, 0.011
-
-    def ramp(stamp, clock_offset, steps):
-        for _ in range(steps):
-            r.step(1, command=(MODE_RAMP, tau_0, duration, r.clock.t + 0.001 - stamp, clock_offset))
+    ramp = partial(_ramp_on_clock, r, tau_0, duration)
 
     r.step(round(STOOD_STILL_LATELY / SETTINGS.sync_period), command=(MODE_POSITION, 0.0))   # answering for a while
     predicted = r.clock.t + 0.005
